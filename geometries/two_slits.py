@@ -1,0 +1,30 @@
+"""The paper's computational example (Section 3): two slits under anti-plane shear.
+
+Ω = (−0.5, 6.5) × (0, 6) with slits {2} × [0, 2] and {4} × [4, 6]; Ω_D is the two strips
+(−0.5, 0) × (0, 6), where g = −t, and (6, 6.5) × (0, 6), where g = +t; t = 0.01 s,
+s = 0, …, 160. The parameters ε = 0.05, η = 1e−5, CRTOL = 1e−4 and the initial mesh size 0.25
+are the package defaults.
+"""
+
+import numpy as np
+
+from ngat.geometry import glue, polygon_face, rectangle
+from ngat.scene import Scene
+
+
+def geometry():
+    """Return the body with its two slits glued to the two loaded strips."""
+    body = polygon_face(
+        [(0, 0), (2, 0), (2, 2), (2, 0), (6, 0), (6, 6), (4, 6), (4, 4), (4, 6), (0, 6)], "body"
+    )
+    return glue([rectangle(-0.5, 0, 0, 6, "left"), body, rectangle(6, 0, 6.5, 6, "right")])
+
+
+scene = Scene(
+    name="two-slits",
+    description="the paper's example: two slits, anti-plane shear g = ∓t on the side strips",
+    geometry=geometry,
+    loads={"left": lambda t: -t, "right": lambda t: t},
+    times=np.round(0.01 * np.arange(161), 10),
+    quick={"times": np.round(np.arange(0.0, 1.61, 0.05), 10), "eps": 0.2, "maxh": 0.1},
+)

@@ -1,0 +1,151 @@
+"""The load-history driver: for each t_k update CR, solve the step, record, write.
+
+For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
+alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
+forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ngat import __version__
+from ngat.minimization import HalfStepMonitor, alternating_minimization
+from ngat.output import ResultsWriter
+from ngat.parameters import Parameters
+from ngat.scene import Scene
+from ngat.state import ATState
+from ngat.timing import PhaseTimer
+
+__all__ = ["run", "RunResult"]
+
+log = logging.getLogger(__name__)
+
+StepCallback = Callable[[dict[str, Any]], None]
+
+
+@dataclass
+class RunResult:
+    """What a run leaves in memory besides its results folder.
+
+    Attributes
+    ----------
+    records
+        One dictionary per load step (the rows of ``energies.csv``).
+    summary
+        The content of ``summary.json``.
+    state
+        The final fields and mesh.
+    """
+
+    records: list[dict[str, Any]] = field(default_factory=list)
+    summary: dict[str, Any] = field(default_factory=dict)
+    state: ATState | None = None
+
+
+def versions() -> dict[str, str]:
+    """Return the versions of Python and the packages a run depends on."""
+    result = {"python": platform.python_version(), "ngat": __version__}
+    for package in ("ngsolve", "numpy", "scipy"):
+        result[package] = version(package)
+    return result
+
+
+def run(
+    scene: Scene,
+    parameters: Parameters,
+    times: np.ndarray,
+    folder: Path,
+    on_step: StepCallback | None = None,
+    monitor: HalfStepMonitor | None = None,
+) -> RunResult:
+    """Run the load history of ``scene`` and write its results folder.
+
+    Parameters
+    ----------
+    scene
+        Geometry, loads and crack of the experiment.
+    parameters
+        Model, solver and adaptivity parameters.
+    times
+        Load times t_0 < t_1 < ….
+    folder
+        Results folder.
+    on_step
+        Called with each step's record (progress display).
+    monitor
+        Called after every half-step of the alternating minimisation (tests, diagnostics).
+
+    Returns
+    -------
+    RunResult
+        Records, summary and the final state.
+    """
+    timer = PhaseTimer()
+    writer = ResultsWriter(folder)
+    result = RunResult()
+    summary = result.summary
+    summary.update(
+        scene=scene.name,
+        parameters=parameters.flat(),
+        times={"first": float(times[0]), "last": float(times[-1]), "count": len(times)},
+        versions=versions(),
+        status="running",
+    )
+    try:
+        with timer("mesh"):
+            mesh = scene.make_mesh(parameters.adaptivity.maxh)
+        state = ATState(mesh, parameters.model, scene.loads, scene.crack, timer)
+        result.state = state
+        log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
+        for k, t in enumerate(times):
+            begin = time.perf_counter()
+            crack = state.crack_set()
+            state.apply_load(float(t))
+            step = alternating_minimization(state, crack, parameters.solver, monitor)
+            record = {"step": k, "t": float(t), **state.energies(), **state.reaction_forces()}
+            record.update(
+                am_iterations=step.iterations,
+                converged=step.converged,
+                **state.mesh_measures(),
+                cracked_vertices=int(crack.sum()),
+            )
+            state.v_prev.vec.data = state.v.vec
+            record["wall_s"] = round(time.perf_counter() - begin, 4)
+            with timer("output"):
+                writer.write_step(record, mesh, {"u": state.u, "v": state.v})
+            result.records.append(record)
+            log.info(
+                "step %d t=%.4g: %d iterations, total %.6g, %d elements",
+                k,
+                t,
+                step.iterations,
+                record["total"],
+                record["elements"],
+            )
+            if on_step:
+                on_step(record)
+        summary["status"] = "completed"
+    except BaseException as error:
+        summary["status"] = f"failed: {type(error).__name__}: {error}"
+        raise
+    finally:
+        summary["steps"] = len(result.records)
+        summary["am_iterations"] = int(sum(r["am_iterations"] for r in result.records))
+        if result.records:
+            last = result.records[-1]
+            summary["final"] = {key: last[key] for key in ("t", "bulk", "surface", "total")}
+            summary["final"].update(elements=last["elements"], h_min=last["h_min"])
+        summary["timing"] = timer.summary()
+        writer.write_summary(summary)
+        writer.close()
+    return result

@@ -1,0 +1,167 @@
+"""Lumped P1 forms a_j and b_j (paper, Definition 2) and their fast in-place assembly.
+
+The vertex rule integrates ``P_j(f)`` exactly for P1 data, so one rule, used for every term, gives
+the mass-lumped functional I_j of eq. (7). The forms are written once as NGSolve BilinearForms
+(:func:`a_form`, :func:`b_form`); their first assembly builds the matrix graph for a mesh. While
+the mesh is unchanged, :class:`LumpedAssembler` rewrites the matrix values in place from
+precomputed element stiffness matrices (one vectorised ``bincount`` per matrix) so that the
+sparse Cholesky factor can be refreshed with ``Inverse.Update()`` reusing its symbolic part.
+"""
+
+from __future__ import annotations
+
+import ngsolve
+import numpy as np
+from ngsolve import TRIG, BilinearForm, IntegrationRule, dx, grad
+
+__all__ = ["vertex_rule", "lumped_dx", "a_form", "b_form", "MeshArrays", "LumpedAssembler"]
+
+
+def vertex_rule() -> IntegrationRule:
+    """Return the vertex (trapezoidal) rule on the reference triangle, weights 1/6 each."""
+    return IntegrationRule(points=[(0, 0), (1, 0), (0, 1)], weights=[1 / 6] * 3)
+
+
+def lumped_dx():
+    """Return ``dx`` with the vertex rule: ``∫ f dx`` becomes ``∫ P_j f dx`` for P1 data."""
+    return dx(intrules={TRIG: vertex_rule()})
+
+
+def a_form(fes: ngsolve.FESpace, v, eta: float) -> BilinearForm:
+    """Return a_j(v; u, φ) = ∫ (P_j(v²) + η) ∇u·∇φ (paper, Definition 2).
+
+    Parameters
+    ----------
+    fes
+        P1 space.
+    v
+        Phase field (GridFunction or CoefficientFunction), frozen during the u-step.
+    eta
+        Residual stiffness η.
+    """
+    u, phi = fes.TnT()
+    form = BilinearForm(fes, symmetric=True)
+    form += (v * v + eta) * grad(u) * grad(phi) * lumped_dx()
+    return form
+
+
+def b_form(fes: ngsolve.FESpace, u, eps: float) -> BilinearForm:
+    """Return b_j(u; v, ψ) without its constant part: ∫ P_j(vψ)(|∇u|² + α) + ε ∇v·∇ψ.
+
+    The remaining term of Definition 2, ``-α ∫ P_j(ψ)``, is the right-hand side of the v-step.
+
+    Parameters
+    ----------
+    fes
+        P1 space.
+    u
+        Displacement, frozen during the v-step.
+    eps
+        Regularisation length ε; α = 1/(4ε).
+    """
+    alpha = 1 / (4 * eps)
+    v, psi = fes.TnT()
+    form = BilinearForm(fes, symmetric=True)
+    form += ((grad(u) * grad(u) + alpha) * v * psi + eps * grad(v) * grad(psi)) * lumped_dx()
+    return form
+
+
+class MeshArrays:
+    """Element geometry of a P1 triangle mesh as numpy arrays, computed once per mesh.
+
+    Attributes
+    ----------
+    elements : (ne, 3) int array
+        Vertex (= P1 DOF) numbers of each triangle.
+    coords : (nv, 2) array
+        Vertex coordinates.
+    area : (ne,) array
+        Element areas |T|.
+    grad_phi : (ne, 3, 2) array
+        Gradients of the barycentric coordinates on each element.
+    stiffness : (ne, 3, 3) array
+        Element stiffness matrices ∫_T ∇φ_a·∇φ_b.
+    mass : (nv,) array
+        Lumped mass ∫ φ_i (the vertex rule).
+    diameter : (ne,) array
+        Element diameters h_T (longest edge).
+    """
+
+    def __init__(self, mesh: ngsolve.Mesh):
+        ngmesh = mesh.ngmesh
+        self.elements = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+        self.coords = ngmesh.Coordinates()[:, :2].copy()
+        self.nv = len(self.coords)
+        self.ne = len(self.elements)
+        xy = self.coords[self.elements]
+        e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        self.area = 0.5 * np.abs(det)
+        # Rows of the inverse Jacobian give ∇λ1, ∇λ2; ∇λ0 = -(∇λ1 + ∇λ2).
+        g1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / det[:, None]
+        g2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / det[:, None]
+        self.grad_phi = np.stack([-(g1 + g2), g1, g2], axis=1)
+        self.stiffness = self.area[:, None, None] * np.einsum(
+            "eak,ebk->eab", self.grad_phi, self.grad_phi
+        )
+        self.mass = np.bincount(
+            self.elements.ravel(), weights=np.repeat(self.area / 3, 3), minlength=self.nv
+        )
+        edges = xy[:, [1, 2, 0]] - xy
+        self.diameter = np.sqrt((edges**2).sum(axis=2)).max(axis=1)
+
+    def gradient(self, values: np.ndarray) -> np.ndarray:
+        """Return the constant gradient of a P1 function on every element, shape (ne, 2)."""
+        return np.einsum("ea,eak->ek", values[self.elements], self.grad_phi)
+
+    def vertex_mean(self, values: np.ndarray) -> np.ndarray:
+        """Return the mean of nodal values over each element's vertices: ∫_T P_j f / |T|."""
+        return values[self.elements].mean(axis=1)
+
+
+class LumpedAssembler:
+    """Write the values of a_j and b_j into matrices with a fixed graph, without NGSolve assembly.
+
+    Parameters
+    ----------
+    arrays
+        Element geometry of the mesh.
+    matrix
+        An assembled NGSolve sparse matrix on the P1 space of that mesh; only its graph is used.
+    """
+
+    def __init__(self, arrays: MeshArrays, matrix: ngsolve.la.SparseMatrixd):
+        _, cols, rowptr = matrix.CSR()
+        cols = np.asarray(cols, dtype=np.int64)
+        rowptr = np.asarray(rowptr, dtype=np.int64)
+        rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
+        n = arrays.nv
+        keys = rows * n + cols
+        el = arrays.elements
+        local = (el[:, :, None] * n + el[:, None, :]).ravel()
+        self.position = np.searchsorted(keys, local)
+        self.diagonal = np.searchsorted(keys, np.arange(n) * n + np.arange(n))
+        self.nnz = len(keys)
+        self.arrays = arrays
+        self.laplace = self._scatter(np.ones(arrays.ne))
+
+    def _scatter(self, coefficient: np.ndarray) -> np.ndarray:
+        weights = (coefficient[:, None, None] * self.arrays.stiffness).ravel()
+        return np.bincount(self.position, weights=weights, minlength=self.nnz)
+
+    def a_values(self, v: np.ndarray, eta: float) -> np.ndarray:
+        """Return the values of a_j(v; ·, ·): element coefficient mean(v²) + η times stiffness."""
+        return self._scatter(self.arrays.vertex_mean(v * v) + eta)
+
+    def b_values(self, grad_u_sq: np.ndarray, eps: float) -> np.ndarray:
+        """Return the values of b_j(u; ·, ·): ε·stiffness plus lumped mass with |∇u|² + α."""
+        alpha = 1 / (4 * eps)
+        arrays = self.arrays
+        diagonal = np.bincount(
+            arrays.elements.ravel(),
+            weights=np.repeat(arrays.area * (grad_u_sq + alpha) / 3, 3),
+            minlength=arrays.nv,
+        )
+        values = eps * self.laplace
+        values[self.diagonal] += diagonal
+        return values

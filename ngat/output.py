@@ -1,0 +1,134 @@
+"""The results folder: energies.csv, fields.pvd with one VTU per step, summary.json, run.log.
+
+Every file is usable while the run goes on and after a crash: each CSV row is flushed when its
+step ends, the VTU of a step is complete before ``fields.pvd`` names it, and ``fields.pvd`` and
+``summary.json`` are replaced atomically (write a temporary file, then rename).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import ngsolve
+
+__all__ = ["ResultsWriter", "write_atomic", "REQUIRED_COLUMNS", "OutputError"]
+
+REQUIRED_COLUMNS = [
+    "step", "t", "bulk", "surface", "total", "force", "am_iterations", "elements", "vertices",
+    "h_min", "h_max", "v_min", "v_max", "wall_s",
+]  # fmt: skip
+
+
+class OutputError(OSError):
+    """The results folder cannot be created or written."""
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and an atomic rename."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+class ResultsWriter:
+    """Write one run's results folder step by step.
+
+    Parameters
+    ----------
+    folder
+        Results folder; created if missing.
+    append
+        Keep the rows and fields already written (resuming a run).
+    """
+
+    def __init__(self, folder: Path, append: bool = False):
+        self.folder = Path(folder)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            (self.folder / "fields").mkdir(exist_ok=True)
+            probe = self.folder / ".write-test"
+            probe.write_text("")
+            probe.unlink()
+        except OSError as error:
+            raise OutputError(
+                f"results folder '{self.folder}' is not writable ({error.strerror}); "
+                "choose another with --out"
+            ) from None
+        self.csv_path = self.folder / "energies.csv"
+        self.pvd_entries: list[tuple[float, str]] = []
+        self.columns: list[str] | None = None
+        if append and self.csv_path.exists():
+            with open(self.csv_path) as f:
+                reader = csv.DictReader(f)
+                self.columns = reader.fieldnames
+                self.pvd_entries = [
+                    (float(row["t"]), f"fields/step_{int(row['step']):04d}.vtu") for row in reader
+                ]
+        elif self.csv_path.exists():
+            self.csv_path.unlink()
+        self.log_handler = logging.FileHandler(self.folder / "run.log")
+        self.log_handler.setFormatter(
+            logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
+        )
+        self.log_handler.setLevel(logging.INFO)
+        logger = logging.getLogger("ngat")
+        logger.addHandler(self.log_handler)
+        if logger.getEffectiveLevel() > logging.INFO:
+            logger.setLevel(logging.INFO)
+
+    def write_step(self, record: dict[str, Any], mesh: ngsolve.Mesh, fields: dict) -> None:
+        """Append one row to ``energies.csv`` and write the step's VTU.
+
+        Parameters
+        ----------
+        record
+            The step's values; its keys fix the columns at the first step.
+        mesh
+            Current mesh.
+        fields
+            Name → GridFunction written to the VTU (u and v).
+        """
+        name = f"fields/step_{int(record['step']):04d}"
+        ngsolve.VTKOutput(
+            ma=mesh,
+            coefs=list(fields.values()),
+            names=list(fields),
+            filename=str(self.folder / name),
+            subdivision=0,
+        ).Do()
+        self.pvd_entries.append((float(record["t"]), f"{name}.vtu"))
+        datasets = "\n".join(
+            f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
+            for t, f in self.pvd_entries
+        )
+        write_atomic(
+            self.folder / "fields.pvd",
+            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+            f"  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n",
+        )
+        new_file = self.columns is None
+        if new_file:
+            self.columns = list(record)
+        with open(self.csv_path, "a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
+            if new_file:
+                writer.writeheader()
+            writer.writerow(record)
+
+    def write_summary(self, summary: dict[str, Any]) -> None:
+        """Replace ``summary.json`` atomically."""
+        write_atomic(self.folder / "summary.json", json.dumps(summary, indent=2, default=str))
+
+    def close(self) -> None:
+        """Detach the log file."""
+        logging.getLogger("ngat").removeHandler(self.log_handler)
+        self.log_handler.close()

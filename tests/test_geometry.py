@@ -1,0 +1,45 @@
+"""Slits are true cracks: u jumps across every slit node, mouth included, also after refinement."""
+
+import numpy as np
+import pytest
+
+from ngat.parameters import ModelParameters
+from ngat.scene import load_scene
+from ngat.state import ATState
+
+
+@pytest.mark.parametrize("rounds", [0, 2])
+def test_u_jumps_across_every_slit_node(rounds):
+    scene = load_scene("two-slits")
+    mesh = scene.make_mesh(0.5)
+    for _ in range(rounds):
+        mesh.Refine()
+    state = ATState(mesh, ModelParameters(), {"left": lambda t: -t, "right": lambda t: t})
+    state.apply_load(1.0)
+    state.solve_u()
+    coords, u = state.arrays.coords, state.u_values
+    x, y = coords[:, 0], coords[:, 1]
+    for slit, tip in [((x == 2) & (y < 2), (2, 2)), ((x == 4) & (y > 4), (4, 4))]:
+        nodes = np.flatnonzero(slit)
+        keys, inverse, counts = np.unique(
+            np.round(coords[nodes], 9), axis=0, return_inverse=True, return_counts=True
+        )
+        # Every slit point except the tip has exactly two nodes, the mouth among them.
+        assert np.all(counts == 2), f"slit points with a single node: {keys[counts != 2]}"
+        assert np.any(np.isclose(keys[:, 1], 0) | np.isclose(keys[:, 1], 6)), "mouth missing"
+        jumps = np.zeros(len(keys))
+        np.maximum.at(jumps, inverse, u[nodes])
+        low = np.full(len(keys), np.inf)
+        np.minimum.at(low, inverse, u[nodes])
+        assert np.all(jumps - low > 0.05), "u does not jump across some slit node"
+        assert len(np.flatnonzero(np.all(np.isclose(coords, tip), axis=1))) == 1
+
+
+def test_dirichlet_region_is_a_material():
+    scene = load_scene("two-slits")
+    mesh = scene.make_mesh(0.5)
+    assert {"left", "right", "body"} == set(mesh.GetMaterials())
+    state = ATState(mesh, ModelParameters(), scene.loads)
+    left = state.region_dofs["left"]
+    assert np.all(state.arrays.coords[left, 0] <= 1e-12)
+    assert np.isclose(state.arrays.coords[left, 0].min(), -0.5)

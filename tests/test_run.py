@@ -1,0 +1,97 @@
+"""The quick two-slits run: Proposition 3, energy decrease, irreversibility, results folder."""
+
+import csv
+import json
+
+import numpy as np
+import pyvista
+
+from ngat.cli import main
+from ngat.output import REQUIRED_COLUMNS
+
+
+def test_v_stays_in_unit_interval_after_every_v_step(quick_run):
+    # Proposition 3 (discrete maximum principle of the lumped v-step).
+    _, log, _ = quick_run
+    ranges = np.array(log.v_ranges)
+    assert len(ranges) > 50
+    assert ranges[:, 0].min() >= -1e-12
+    assert ranges[:, 1].max() <= 1 + 1e-12
+    assert ranges[:, 0].min() < 0.05, "the quick run should crack"
+
+
+def test_alternating_minimization_never_increases_energy(quick_run):
+    _, log, _ = quick_run
+    steps = np.array([s for s, _, _ in log.energies])
+    energy = np.array([e for _, _, e in log.energies])
+    within = steps[1:] == steps[:-1]
+    increase = (energy[1:] - energy[:-1])[within]
+    assert within.sum() > 100
+    assert increase.max() <= 1e-10 * np.abs(energy).max()
+
+
+def test_crack_set_never_shrinks(quick_run):
+    _, log, _ = quick_run
+    sizes = [mask.sum() for mask in log.cracks]
+    assert sizes[-1] > 0, "CR stays empty: the test would not test anything"
+    for before, after in zip(log.cracks[:-1], log.cracks[1:], strict=True):
+        assert np.all(after[: len(before)][before])
+
+
+def test_cracks_grow_from_the_slit_tips(quick_run):
+    result, _, _ = quick_run
+    state = result.state
+    cracked = state.arrays.coords[state.v_values < 0.1]
+    # Both slits extend: cracked points below/above the tips, and the two cracks meet.
+    assert np.any((cracked[:, 1] > 2.5) & (np.abs(cracked[:, 0] - 2) < 1.5))
+    assert np.any((cracked[:, 1] < 3.5) & (np.abs(cracked[:, 0] - 4) < 1.5))
+
+
+def test_quick_run_writes_the_whole_results_folder(quick_run):
+    result, _, folder = quick_run
+    with open(folder / "energies.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert set(REQUIRED_COLUMNS) <= set(rows[0])
+    assert len(rows) == len(result.records) == 33
+    totals = np.array([float(r["total"]) for r in rows])
+    parts = np.array([float(r["bulk"]) + float(r["surface"]) for r in rows])
+    np.testing.assert_allclose(totals, parts, rtol=1e-12)
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert {"assembly", "solve", "output", "wall"} <= set(summary["timing"])
+    assert summary["versions"]["ngsolve"]
+    assert (folder / "run.log").stat().st_size > 0
+    series = pyvista.get_reader(str(folder / "fields.pvd"))
+    assert len(series.time_values) == 33
+    series.set_active_time_point(len(series.time_values) - 1)
+    grid = series.read()[0]
+    assert {"u", "v"} <= set(grid.point_data.keys())
+    assert np.isclose(grid.point_data["v"].min(), result.records[-1]["v_min"], atol=1e-6)
+
+
+def test_reaction_force_is_the_load_derivative_of_the_bulk_energy(quick_run):
+    # With v fixed the bulk energy is quadratic in t, so a central difference is exact.
+    result, _, _ = quick_run
+    state = result.state
+    t, h = 1.0, 1e-3
+    energies = []
+    for s in (t - h, t + h):
+        state.apply_load(s)
+        state.solve_u()
+        energies.append(state.energies()["bulk"])
+    state.apply_load(t)
+    state.solve_u()
+    forces = state.reaction_forces()
+    assert abs(forces["force"] - (energies[1] - energies[0]) / (2 * h)) < 1e-8 * abs(
+        forces["force"]
+    )
+    assert abs(forces["force_left"] + forces["force_right"]) < 1e-8 * abs(forces["force_right"])
+
+
+def test_cli_runs_a_scene_and_names_bad_input(tmp_path, capsys):
+    assert main(["run", "profile-1d", "--quick", "--quiet", "--out", str(tmp_path / "p")]) == 0
+    assert (tmp_path / "p" / "energies.csv").exists()
+    assert main(["run", "no-such-scene", "--quiet"]) == 2
+    assert "unknown scene 'no-such-scene'" in capsys.readouterr().err
+    assert main(["run", "profile-1d", "--quiet", "--set", "eps=-1"]) == 2
+    assert "eps must be positive" in capsys.readouterr().err
