@@ -2,7 +2,8 @@
 
 Errors in the input (unknown scene, bad parameter, unwritable folder, a scene without Dirichlet
 region) print one line naming the problem and exit with status 2; ``--debug`` shows the
-traceback instead.
+traceback instead. ``ngat run`` never replaces a run already in its results folder unless told:
+``--overwrite`` starts afresh, ``--resume`` continues it.
 """
 
 from __future__ import annotations
@@ -13,11 +14,13 @@ import sys
 from pathlib import Path
 
 from rich.console import Console
+from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from ngat.checkpoint import finished_steps
 from ngat.driver import run
 from ngat.minimization import ConvergenceError
-from ngat.output import OutputError
+from ngat.output import OutputError, check_results_folder
 from ngat.parameters import ParameterError
 from ngat.scene import SceneNotFound, load_scene, scene_names
 from ngat.state import SceneError
@@ -42,7 +45,17 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
     """Run one scene with a progress bar."""
     scene = load_scene(args.scene)
     parameters, times = scene.configure(args.quick, parse_settings(args.set))
-    folder = Path(args.out or f"results/{scene.name}{'-quick' if args.quick else ''}")
+    if args.resume and (args.out or args.overwrite):
+        raise ParameterError("--resume DIR names the results folder: leave out --out, --overwrite")
+    folder = Path(
+        args.resume or args.out or f"results/{scene.name}{'-quick' if args.quick else ''}"
+    )
+    mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
+    existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
+    if args.resume and existing.get("status") == "completed":
+        console.print(f"nothing to resume: the run in {folder} is complete")
+        return 0
+    done = finished_steps(folder) if args.resume else 0
     columns = [
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -50,8 +63,8 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
         TextColumn("{task.fields[info]}"),
         TimeElapsedColumn(),
     ]
-    with Progress(*columns, console=console, disable=args.quiet) as progress:
-        task = progress.add_task(scene.name, total=len(times), info="")
+    with Progress(*columns, console=console, disable=args.quiet, transient=True) as progress:
+        task = progress.add_task(scene.name, total=len(times), completed=done, info="")
 
         def on_step(record: dict) -> None:
             info = (
@@ -60,7 +73,7 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             )
             progress.update(task, advance=1, info=info)
 
-        result = run(scene, parameters, times, folder, on_step=on_step)
+        result = run(scene, parameters, times, folder, on_step=on_step, resume=bool(args.resume))
     if not args.quiet:
         final = result.summary["final"]
         console.print(
@@ -70,10 +83,83 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
     return 0
 
 
+def command_sweep(args: argparse.Namespace, console: Console) -> int:
+    """Run a parameter sweep on Dask with a progress bar, or draw one (``--plot``).
+
+    Exit status 1 if a run of the sweep failed (its error is in ``sweep.csv``).
+    """
+    # Imported here: dask is only needed for sweeps.
+    from ngat.sweep import parse_grid, plot_sweep, sweep
+
+    if args.plot:
+        if not args.x or not args.y:
+            raise ParameterError("--plot needs --x PARAMETER and --y COLUMN [COLUMN ...]")
+        path = plot_sweep(args.plot, args.x, args.y)
+        if not args.quiet:
+            console.print(f"→ {path}")
+        return 0
+    if not args.scene or not args.grid:
+        raise ParameterError(
+            "ngat sweep needs a scene and --grid NAME=V1,V2 ... (or --plot DIR --x NAME --y COLUMN)"
+        )
+    grid = parse_grid(args.grid)
+    name = load_scene(args.scene).name
+    folder = Path(args.out or f"results/sweep-{name}{'-quick' if args.quick else ''}")
+    total = 1
+    for values in grid.values():
+        total *= len(values)
+    columns = [
+        TextColumn("[bold]sweep {task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[info]}"),
+        TimeElapsedColumn(),
+    ]
+    with Progress(*columns, console=console, disable=args.quiet, transient=True) as progress:
+        task = progress.add_task(name, total=total, info="")
+
+        def on_result(row: dict) -> None:
+            progress.update(task, advance=1, info=f"{row['run']}: {row['status']}")
+
+        rows = sweep(
+            args.scene,
+            grid,
+            folder,
+            scheduler=args.scheduler,
+            quick=args.quick,
+            overrides=parse_settings(args.set),
+            workers=args.workers,
+            on_result=on_result,
+        )
+    failed = [row for row in rows if row["status"] != "completed"]
+    if not args.quiet:
+        skipped = sum(bool(row["skipped"]) for row in rows)
+        console.print(
+            f"sweep {name}: {len(rows) - len(failed)} of {len(rows)} runs completed "
+            f"({skipped} by an earlier sweep), {len(failed)} failed → {folder / 'sweep.csv'}"
+        )
+        for row in failed:
+            console.print(f"  {row['run']}: {row['error']}", markup=False, highlight=False)
+    return 1 if failed else 0
+
+
 def command_scenes(args: argparse.Namespace, console: Console) -> int:
     """List the package's scenes."""
     for name in scene_names():
         console.print(f"{name:14s} {load_scene(name).description}")
+    return 0
+
+
+def command_plot(args: argparse.Namespace, console: Console) -> int:
+    """Draw the pictures of a results folder."""
+    # Imported here: matplotlib and pyvista are only needed for pictures.
+    from ngat.plotting import plot_results
+
+    zoom = tuple(args.zoom) if args.zoom else None
+    written = plot_results(args.folder, times=args.times, zoom=zoom)
+    if not args.quiet:
+        names = ", ".join(p.name for p in written)
+        console.print(f"{len(written)} pictures → {args.folder}: {names}")
     return 0
 
 
@@ -89,10 +175,45 @@ def build_parser() -> argparse.ArgumentParser:
     p_run.add_argument(
         "--set", action="append", default=[], metavar="NAME=VALUE", help="change a parameter"
     )
+    p_run.add_argument(
+        "--overwrite", action="store_true", help="replace the run already in the results folder"
+    )
+    p_run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
     p_run.add_argument("--quiet", action="store_true", help="no progress bar")
     p_run.set_defaults(handler=command_run)
     p_scenes = sub.add_parser("scenes", help="list the scenes")
     p_scenes.set_defaults(handler=command_scenes)
+    p_sweep = sub.add_parser("sweep", help="run every combination of a parameter grid on Dask")
+    p_sweep.add_argument("scene", nargs="?", help="scene name or path to a scene file")
+    p_sweep.add_argument(
+        "--grid", nargs="+", metavar="NAME=V1,V2", help="parameter values, e.g. eps=0.05,0.025"
+    )
+    p_sweep.add_argument("--out", help="sweep folder (default results/sweep-SCENE)")
+    p_sweep.add_argument("--quick", action="store_true", help="quick variant of every run")
+    p_sweep.add_argument(
+        "--set", action="append", default=[], metavar="NAME=VALUE", help="change a parameter"
+    )
+    p_sweep.add_argument("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler")
+    p_sweep.add_argument(
+        "--workers", type=int, help="local worker processes (default: one per core)"
+    )
+    p_sweep.add_argument("--plot", metavar="DIR", help="draw the sweep in DIR instead of running")
+    p_sweep.add_argument("--x", metavar="NAME", help="grid parameter on the x axis (--plot)")
+    p_sweep.add_argument(
+        "--y", nargs="+", metavar="COLUMN", help="sweep.csv columns to draw (--plot)"
+    )
+    p_sweep.add_argument("--quiet", action="store_true", help="no progress bar, no log lines")
+    p_sweep.set_defaults(handler=command_sweep)
+    p_plot = sub.add_parser("plot", help="draw the pictures of a (finished or partial) run")
+    p_plot.add_argument("folder", help="results folder")
+    p_plot.add_argument(
+        "--times", type=float, nargs="+", metavar="T", help="load times of the v pictures"
+    )
+    p_plot.add_argument(
+        "--zoom", type=float, nargs=3, metavar=("X", "Y", "R"), help="window of mesh_zoom.png"
+    )
+    p_plot.add_argument("--quiet", action="store_true", help="no list of the pictures")
+    p_plot.set_defaults(handler=command_plot)
     return parser
 
 
@@ -100,15 +221,22 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ngat`` command."""
     args = build_parser().parse_args(argv)
     console = Console(stderr=True)
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    # ngat's INFO lines go to the terminal unless --quiet (run.log keeps them either way);
+    # other libraries' (dask's) only from WARNING up.
+    handler = RichHandler(console=console, show_time=False, show_path=False, markup=False)
+    handler.setLevel(logging.WARNING if getattr(args, "quiet", False) else logging.INFO)
+    handler.addFilter(lambda record: record.name.startswith("ngat") or record.levelno >= 30)
+    logging.getLogger().addHandler(handler)
     logging.getLogger("ngat").setLevel(logging.INFO)
     try:
         return args.handler(args, console)
     except (*INPUT_ERRORS, ConvergenceError) as error:
         if args.debug:
             raise
-        console.print(f"ngat: error: {error}", markup=False, highlight=False)
+        console.print(f"ngat: error: {error}", markup=False, highlight=False, soft_wrap=True)
         return 2
+    finally:
+        logging.getLogger().removeHandler(handler)
 
 
 if __name__ == "__main__":

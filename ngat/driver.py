@@ -19,7 +19,15 @@ from typing import Any
 import numpy as np
 
 from ngat import __version__
-from ngat.minimization import HalfStepMonitor, alternating_minimization
+from ngat.checkpoint import (
+    prepare_resume,
+    remove_checkpoint,
+    replay_refinements,
+    restore_state,
+    save_checkpoint,
+)
+from ngat.crack import connects, crack_tips
+from ngat.minimization import HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
 from ngat.scene import Scene
@@ -60,6 +68,18 @@ def versions() -> dict[str, str]:
     return result
 
 
+def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
+    """Return the tip of each slit's crack and whether {v ≥ 0.1} connects the Ω_D regions."""
+    measures: dict[str, Any] = {}
+    tips = crack_tips(state.arrays, state.v_values, scene.slits)
+    for i, (x, y) in enumerate(tips, start=1):
+        measures[f"tip{i}_x"], measures[f"tip{i}_y"] = x, y
+    regions = list(state.region_dofs.values())
+    if len(regions) >= 2:
+        measures["connected"] = connects(state.arrays, state.v_values, regions[0], regions[1])
+    return measures
+
+
 def run(
     scene: Scene,
     parameters: Parameters,
@@ -67,6 +87,7 @@ def run(
     folder: Path,
     on_step: StepCallback | None = None,
     monitor: HalfStepMonitor | None = None,
+    resume: bool = False,
 ) -> RunResult:
     """Run the load history of ``scene`` and write its results folder.
 
@@ -84,6 +105,10 @@ def run(
         Called with each step's record (progress display).
     monitor
         Called after every half-step of the alternating minimisation (tests, diagnostics).
+    resume
+        Continue the interrupted run in ``folder`` from its checkpoint (same scene, parameters
+        and times, else :class:`~ngat.output.OutputError`); the result is the same as that of
+        an uninterrupted run. Without a checkpoint the run starts from the first step.
 
     Returns
     -------
@@ -91,7 +116,8 @@ def run(
         Records, summary and the final state.
     """
     timer = PhaseTimer()
-    writer = ResultsWriter(folder)
+    checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
+    writer = ResultsWriter(folder, append=checkpoint is not None)
     result = RunResult()
     summary = result.summary
     summary.update(
@@ -100,30 +126,58 @@ def run(
         times={"first": float(times[0]), "last": float(times[-1]), "count": len(times)},
         versions=versions(),
         status="running",
+        refinement_history=[],
     )
+    # -- checkpoints: a fresh run drops a stale one, a resumed run continues from it -----------
+    if checkpoint is None:
+        remove_checkpoint(folder)
+    else:
+        summary.update({**checkpoint.summary, "status": "running", "versions": versions()})
+        summary.setdefault("resumed_after_step", []).append(checkpoint.step)
+    writer.write_summary(summary)
     try:
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
-        state = ATState(mesh, parameters.model, scene.loads, scene.crack, timer)
+            if checkpoint is not None:
+                replay_refinements(mesh, checkpoint)
+        state = ATState(
+            mesh, parameters.model, scene.loads, scene.crack, timer, parameters.solver.max_cg
+        )
+        if checkpoint is not None:
+            restore_state(state, checkpoint)
+            result.records.extend(checkpoint.records)
         result.state = state
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
         for k, t in enumerate(times):
+            if k < len(result.records):
+                continue
             begin = time.perf_counter()
-            crack = state.crack_set()
             state.apply_load(float(t))
-            step = alternating_minimization(state, crack, parameters.solver, monitor)
+            step = alternating_minimization(
+                state, parameters.solver, parameters.adaptivity, monitor
+            )
+            crack = state.crack_set()
             record = {"step": k, "t": float(t), **state.energies(), **state.reaction_forces()}
             record.update(
                 am_iterations=step.iterations,
                 converged=step.converged,
+                refinements=step.refinements,
+                mu=float(np.sqrt(estimate(state, "u", crack).sum())),
+                nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),
                 cracked_vertices=int(crack.sum()),
             )
+            record.update(crack_measures(state, scene))
+            if "fracture_time" not in summary and record.get("connected") is False:
+                summary["fracture_time"] = float(t)
+            summary["refinement_history"].extend({"step": k, **h} for h in step.history)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
             with timer("output"):
                 writer.write_step(record, mesh, {"u": state.u, "v": state.v})
             result.records.append(record)
+            with timer("checkpoint"):
+                save_checkpoint(folder, state, k, result.records, summary)
             log.info(
                 "step %d t=%.4g: %d iterations, total %.6g, %d elements",
                 k,

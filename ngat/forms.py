@@ -1,11 +1,12 @@
 """Lumped P1 forms a_j and b_j (paper, Definition 2) and their fast in-place assembly.
 
 The vertex rule integrates ``P_j(f)`` exactly for P1 data, so one rule, used for every term, gives
-the mass-lumped functional I_j of eq. (7). The forms are written once as NGSolve BilinearForms
-(:func:`a_form`, :func:`b_form`); their first assembly builds the matrix graph for a mesh. While
-the mesh is unchanged, :class:`LumpedAssembler` rewrites the matrix values in place from
-precomputed element stiffness matrices (one vectorised ``bincount`` per matrix) so that the
-sparse Cholesky factor can be refreshed with ``Inverse.Update()`` reusing its symbolic part.
+the mass-lumped functional I_j of eq. (7). The forms are written as NGSolve BilinearForms
+(:func:`a_form`, :func:`b_form`): they are the definition, and one assembly of a_j per mesh
+builds the matrix graph. Every solve then gets its values from :class:`LumpedAssembler`, which
+writes them in place from precomputed element stiffness matrices (one vectorised ``bincount``)
+so that the sparse Cholesky factor is refreshed with ``Inverse.Update()``, reusing its symbolic
+part; a test checks that these values equal the assembled forms.
 """
 
 from __future__ import annotations

@@ -11,13 +11,22 @@ import csv
 import json
 import logging
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
 
 import ngsolve
 
-__all__ = ["ResultsWriter", "write_atomic", "REQUIRED_COLUMNS", "OutputError"]
+__all__ = [
+    "ResultsWriter",
+    "write_atomic",
+    "read_summary",
+    "check_results_folder",
+    "times_summary",
+    "REQUIRED_COLUMNS",
+    "OutputError",
+]
 
 REQUIRED_COLUMNS = [
     "step", "t", "bulk", "surface", "total", "force", "am_iterations", "elements", "vertices",
@@ -27,6 +36,118 @@ REQUIRED_COLUMNS = [
 
 class OutputError(OSError):
     """The results folder cannot be created or written."""
+
+
+def read_summary(folder: Path) -> dict[str, Any] | None:
+    """Return the ``summary.json`` of the run in ``folder``.
+
+    Returns
+    -------
+    dict or None
+        The summary; ``{}`` if the folder holds rows of a run (``energies.csv``) but no readable
+        summary; ``None`` if it holds no run.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return None
+    try:
+        return json.loads((folder / "summary.json").read_text())
+    except FileNotFoundError:
+        return {} if (folder / "energies.csv").exists() else None
+    except (OSError, ValueError):
+        return {}
+
+
+def times_summary(times: Sequence[float]) -> dict[str, Any]:
+    """Return the load times as ``summary.json`` records them: first, last and count."""
+    return {"first": float(times[0]), "last": float(times[-1]), "count": len(times)}
+
+
+def _identity(parameters: dict[str, Any], times: dict[str, Any]) -> dict[str, Any]:
+    """Return what a resumed run must share with the interrupted one, as one flat dict."""
+    return {**parameters, **{f"times.{key}": value for key, value in times.items()}}
+
+
+def check_results_folder(
+    folder: Path,
+    scene: str,
+    parameters: dict[str, Any],
+    times: Sequence[float],
+    mode: str = "new",
+) -> dict[str, Any] | None:
+    """Refuse a results folder that would lose or mix up another run's files.
+
+    ``mode="new"``: the folder must hold no run (a fresh run would replace its files), or only
+    one that failed before its first step;
+    ``"overwrite"``: anything goes; ``"resume"``: the folder must hold a run of the same scene
+    with the same parameters and load times.
+
+    Parameters
+    ----------
+    folder
+        Results folder.
+    scene
+        Scene name of the new run.
+    parameters
+        Flat parameters of the new run (:meth:`ngat.parameters.Parameters.flat`).
+    times
+        Load times of the new run (compared by first, last and count, as in the summary).
+    mode
+        ``"new"``, ``"overwrite"`` or ``"resume"``.
+
+    Returns
+    -------
+    dict or None
+        The existing summary (see :func:`read_summary`).
+
+    Raises
+    ------
+    OutputError
+        Naming the conflict and the options.
+    """
+    summary = read_summary(folder)
+    if mode == "overwrite":
+        return summary
+    if mode == "new":
+        nothing_to_lose = (
+            summary is not None
+            and summary.get("steps") == 0
+            and not (Path(folder) / "energies.csv").exists()
+        )
+        if summary is not None and not nothing_to_lose:
+            what = (
+                f"a run of scene '{summary['scene']}' (status {summary.get('status')})"
+                if "scene" in summary
+                else "a run"
+            )
+            raise OutputError(
+                f"results folder '{folder}' already holds {what}: choose another folder with "
+                "--out, pass --overwrite to replace it or --resume to continue it"
+            )
+        return summary
+    if not summary or "scene" not in summary:
+        raise OutputError(
+            f"cannot resume '{folder}': it holds no run with a summary.json; start the run "
+            "without --resume"
+        )
+    if summary["scene"] != scene:
+        raise OutputError(
+            f"cannot resume '{folder}': it holds a run of scene '{summary['scene']}', not "
+            f"'{scene}'; give the same scene or another folder"
+        )
+    theirs = _identity(summary.get("parameters", {}), summary.get("times", {}))
+    ours = _identity(parameters, times_summary(times))
+    differ = [
+        f"{key}: {theirs.get(key)} there, {ours.get(key)} here"
+        for key in sorted(theirs.keys() | ours.keys())
+        if theirs.get(key) != ours.get(key)
+    ]
+    if differ:
+        raise OutputError(
+            f"cannot resume '{folder}': its parameters differ ({'; '.join(differ)}); resume "
+            "with the same --quick and --set values, or start afresh with --overwrite"
+        )
+    return summary
 
 
 def write_atomic(path: Path, text: str) -> None:

@@ -8,6 +8,7 @@ and sweep grids can address them without a prefix.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -50,15 +51,18 @@ class ModelParameters:
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
         if not self.eps > 0:
-            raise ParameterError(f"eps must be positive, got eps={self.eps}")
+            raise ParameterError(f"eps must be positive, got eps={self.eps}: choose eps > 0")
         if not self.eta >= 0:
-            raise ParameterError(f"eta must be non-negative, got eta={self.eta}")
+            raise ParameterError(f"eta must be non-negative, got eta={self.eta}: choose eta >= 0")
         if not self.eta < self.eps:
             raise ParameterError(
-                f"eta must be smaller than eps, got eta={self.eta}, eps={self.eps}"
+                f"eta must be smaller than eps, got eta={self.eta}, eps={self.eps}: "
+                "choose eta < eps (eta << eps)"
             )
         if not 0 < self.crtol < 1:
-            raise ParameterError(f"crtol must lie in (0, 1), got crtol={self.crtol}")
+            raise ParameterError(
+                f"crtol must lie in (0, 1), got crtol={self.crtol}: choose 0 < crtol < 1"
+            )
 
 
 @dataclass(frozen=True)
@@ -71,10 +75,14 @@ class SolverParameters:
         Stop when ‖v^n − v^{n−1}‖_∞ < am_tol.
     am_max_iter
         Iteration limit per load step.
+    max_cg
+        CG iterations accepted with a stale Cholesky factor as preconditioner before the
+        factor is refreshed (:class:`ngat.linear.LaggedCholesky`); 0: refactorise every solve.
     """
 
     am_tol: float = 1e-3
     am_max_iter: int = 1000
+    max_cg: int = 0
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
@@ -86,20 +94,54 @@ class SolverParameters:
 
 @dataclass(frozen=True)
 class AdaptivityParameters:
-    """Mesh: initial size and, later, refinement (paper, Algorithm 2).
+    """Mesh: initial size and refinement (paper, Algorithm 2).
 
     Attributes
     ----------
     maxh
         Initial mesh size.
+    adapt
+        ``"paper"``: refine inside each half-step until μ ≤ tol and ν ≤ tol (Algorithm 2);
+        ``"after"``: refine only after the alternating minimisation has converged at a load
+        step, then repeat it; ``"fixed"``: no refinement (Algorithm 1).
+    tol
+        Tolerance TOL_n for μ and ν.
+    theta
+        Marking parameter θ.
+    marking
+        ``"dorfler"`` (bulk) or ``"maximum"``.
+    h_floor
+        Elements with diameter ≤ h_floor are never refined (see :func:`ngat.refinement.refine`).
+    max_refinements
+        Limit of refinements per load step.
     """
 
     maxh: float = 0.25
+    adapt: str = "paper"
+    tol: float = 0.3
+    theta: float = 0.5
+    marking: str = "dorfler"
+    h_floor: float = 1e-3
+    max_refinements: int = 200
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
         if not self.maxh > 0:
             raise ParameterError(f"maxh must be positive, got maxh={self.maxh}")
+        if self.adapt not in ("paper", "after", "fixed"):
+            raise ParameterError(f"adapt must be paper, after or fixed, got adapt={self.adapt}")
+        if not self.tol > 0:
+            raise ParameterError(f"tol must be positive, got tol={self.tol}: choose tol > 0")
+        if not 0 < self.theta <= 1:
+            raise ParameterError(f"theta must lie in (0, 1], got theta={self.theta}")
+        if self.marking not in ("dorfler", "maximum"):
+            raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
+        if not self.h_floor >= 0:
+            raise ParameterError(f"h_floor must be non-negative, got h_floor={self.h_floor}")
+        if not self.max_refinements >= 0:
+            raise ParameterError(
+                f"max_refinements must be >= 0, got max_refinements={self.max_refinements}"
+            )
 
 
 @dataclass(frozen=True)
@@ -135,15 +177,19 @@ class Parameters:
         for name, value in values.items():
             if name not in names:
                 known = ", ".join(sorted(names))
-                raise ParameterError(f"unknown parameter '{name}' (known: {known})")
+                close = difflib.get_close_matches(name, names, n=1)
+                hint = f"did you mean '{close[0]}'? " if close else ""
+                raise ParameterError(f"unknown parameter '{name}': {hint}known are {known}")
             kind = names[name]
             try:
                 converted = kind(value) if not isinstance(value, kind) else value
                 if kind is int and isinstance(value, float) and value != int(value):
                     raise ValueError
             except (TypeError, ValueError):
+                example = self.flat()[name]
                 raise ParameterError(
-                    f"parameter '{name}' needs a {kind.__name__}, got {value!r}"
+                    f"parameter '{name}' needs a value of type {kind.__name__}, got {value!r}: "
+                    f"give e.g. {name}={example}"
                 ) from None
             group = next(g for g, obj in groups.items() if hasattr(obj, name))
             changes.setdefault(group, {})[name] = converted

@@ -19,14 +19,31 @@ import numpy as np
 
 from ngat.geometry import generate_mesh
 from ngat.parameters import Parameters
+from ngat.state import SceneError
 
-__all__ = ["Scene", "load_scene", "scene_names", "SceneNotFound"]
+__all__ = [
+    "Scene",
+    "load_scene",
+    "scene_names",
+    "check_times",
+    "SceneNotFound",
+    "SceneFileError",
+    "SceneTimesError",
+]
 
 GEOMETRIES = Path(__file__).resolve().parent.parent / "geometries"
 
 
 class SceneNotFound(LookupError):
     """No scene of that name or path, or the file defines no scene."""
+
+
+class SceneFileError(SceneNotFound):
+    """A scene file that cannot be executed (syntax error, failing import, ...)."""
+
+
+class SceneTimesError(ValueError):
+    """A scene's load times are not a strictly increasing sequence."""
 
 
 @dataclass(frozen=True)
@@ -55,6 +72,9 @@ class Scene:
         One line for ``ngat scenes``.
     mesh
         Optional mesh builder ``mesh(maxh)`` replacing the OCC meshing of ``geometry``.
+    slits
+        Slits as segments ``((x_mouth, y_mouth), (x_tip, y_tip))``: the crack tips grown from
+        them are recorded per step (:func:`ngat.crack.crack_tips`).
     """
 
     name: str
@@ -66,12 +86,34 @@ class Scene:
     quick: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     description: str = ""
     mesh: Callable[[float], ngsolve.Mesh] | None = None
+    slits: Sequence[tuple[tuple[float, float], tuple[float, float]]] = ()
 
     def make_mesh(self, maxh: float) -> ngsolve.Mesh:
         """Return the initial mesh with element size ``maxh``."""
         if self.mesh is not None:
             return self.mesh(maxh)
         return generate_mesh(self.geometry(), maxh)
+
+    def check(self) -> None:
+        """Raise :class:`~ngat.state.SceneError` if a Dirichlet region is missing.
+
+        That is: the scene has no Dirichlet region, or its geometry has no face of a Dirichlet
+        region's name. Scenes with their own ``mesh`` builder are checked on the mesh, by
+        :class:`~ngat.state.ATState`.
+        """
+        if not self.loads:
+            raise SceneError(
+                f"scene '{self.name}' has no Dirichlet region: give at least one entry in 'loads'"
+            )
+        if self.mesh is not None or self.geometry is None:
+            return
+        faces = {face.name for face in self.geometry().faces}
+        missing = sorted(set(self.loads) - faces)
+        if missing:
+            raise SceneError(
+                f"scene '{self.name}': Dirichlet region(s) {missing} are not faces of the "
+                f"geometry (faces: {sorted(faces)}); name the OCC faces accordingly"
+            )
 
     def configure(
         self, quick: bool = False, overrides: Mapping[str, Any] | None = None
@@ -84,6 +126,15 @@ class Scene:
             Apply the scene's ``quick`` changes.
         overrides
             Further changes by name (from ``--set``), applied last.
+
+        Raises
+        ------
+        ParameterError
+            For an unknown parameter or an invalid value.
+        SceneTimesError
+            Unless the load times increase strictly.
+        SceneError
+            See :meth:`check`.
         """
         changes = dict(self.parameters)
         times = self.times
@@ -93,9 +144,25 @@ class Scene:
             changes.update(quick_changes)
         changes.update(overrides or {})
         times = np.asarray(times, dtype=float)
-        if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) <= 0):
-            raise ValueError(f"scene '{self.name}': load times must be increasing, got {times}")
+        check_times(self.name, times)
+        self.check()
         return Parameters().replace(**changes), times
+
+
+def check_times(name: str, times: np.ndarray) -> None:
+    """Raise :class:`SceneTimesError` unless ``times`` is a non-empty increasing 1-D sequence."""
+    fix = f"fix 'times' (or the 'times' of 'quick') in scene '{name}'"
+    if times.ndim != 1 or len(times) == 0:
+        raise SceneTimesError(f"scene '{name}' has no load times: {fix}")
+    if not np.all(np.isfinite(times)):
+        raise SceneTimesError(f"scene '{name}': load times must be finite numbers; {fix}")
+    bad = np.flatnonzero(np.diff(times) <= 0)
+    if len(bad):
+        k = int(bad[0]) + 1
+        raise SceneTimesError(
+            f"scene '{name}': load times must be strictly increasing, but t[{k}] = "
+            f"{times[k]:g} follows t[{k - 1}] = {times[k - 1]:g}; {fix}"
+        )
 
 
 def scene_names() -> list[str]:
@@ -112,19 +179,39 @@ def load_scene(name_or_path: str) -> Scene:
     ------
     SceneNotFound
         If there is no such scene or the file defines no ``scene``.
+    SceneFileError
+        If executing the scene file raises (a syntax error, a failing import, ...).
     """
     path = Path(name_or_path)
-    if not (path.suffix == ".py" and path.exists()):
+    if path.suffix == ".py" or len(path.parts) > 1:
+        if not path.is_file():
+            raise SceneNotFound(f"scene file '{name_or_path}' does not exist: check the path")
+        if path.suffix != ".py":
+            raise SceneNotFound(f"scene file '{name_or_path}' is not a Python file (.py)")
+    else:
         path = GEOMETRIES / f"{name_or_path.replace('-', '_')}.py"
-    if not path.exists():
-        raise SceneNotFound(
-            f"unknown scene '{name_or_path}': give a scene file path or one of "
-            f"{', '.join(scene_names())}"
-        )
+        if not path.is_file():
+            raise SceneNotFound(
+                f"unknown scene '{name_or_path}': give a scene file path or one of "
+                f"{', '.join(scene_names())}"
+            )
     spec = importlib.util.spec_from_file_location(f"ngat_scene_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as error:
+        raise SceneFileError(
+            f"scene file '{path}' has a syntax error at line {error.lineno}: {error.msg}; "
+            "fix the file"
+        ) from error
+    except Exception as error:
+        raise SceneFileError(
+            f"scene file '{path}' failed to load ({type(error).__name__}: {error}); fix the "
+            "file (run with --debug for the traceback)"
+        ) from error
     scene = getattr(module, "scene", None)
     if not isinstance(scene, Scene):
-        raise SceneNotFound(f"{path} defines no 'scene = Scene(...)'")
+        raise SceneNotFound(
+            f"scene file '{path}' defines no scene: add 'scene = Scene(...)' (ngat.scene.Scene)"
+        )
     return scene

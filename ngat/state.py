@@ -15,9 +15,11 @@ from collections.abc import Callable, Mapping
 
 import ngsolve
 import numpy as np
-from ngsolve import H1, BitArray, GridFunction, Parameter
+from ngsolve import H1, TRIG, GridFunction, IntegrationRule, Parameter
 
-from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
+from ngat.estimators import EdgeTopology
+from ngat.forms import LumpedAssembler, MeshArrays, a_form
+from ngat.linear import LaggedCholesky
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
 
@@ -48,6 +50,9 @@ class ATState:
         of the vertex coordinates (nv, 2) returning a boolean mask.
     timer
         Accumulates wall time per phase.
+    max_cg
+        CG iterations accepted with a stale Cholesky factor before it is refreshed
+        (:class:`ngat.linear.LaggedCholesky`); 0 refactorises at every solve.
     """
 
     def __init__(
@@ -57,6 +62,7 @@ class ATState:
         loads: Mapping[str, Load],
         crack: str | Callable[[np.ndarray], np.ndarray] | None = None,
         timer: PhaseTimer | None = None,
+        max_cg: int = 0,
     ):
         if not loads:
             raise SceneError("the scene has no Dirichlet region: give at least one load")
@@ -70,6 +76,7 @@ class ATState:
         self.mesh = mesh
         self.model = model
         self.timer = timer or PhaseTimer()
+        self.max_cg = max_cg
         self.t = Parameter(0.0)
         self.loads = {name: g(self.t) for name, g in loads.items()}
         self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
@@ -78,6 +85,9 @@ class ATState:
         self.u = GridFunction(self.fes, autoupdate=True)
         self.v = GridFunction(self.fes, autoupdate=True)
         self.v_prev = GridFunction(self.fes, autoupdate=True)
+        self.v_iter = GridFunction(self.fes, autoupdate=True)
+        # The marked elements of every mesh.Refine(), in order: a checkpoint replays them.
+        self.refinements: list[np.ndarray] = []
         self.v.vec[:] = 1.0
         self.v_prev.vec[:] = 1.0
         self.mesh_changed()
@@ -87,11 +97,12 @@ class ATState:
         """Rebuild everything that depends on the mesh (call after ``mesh.Refine()``)."""
         with self.timer("assembly"):
             self.arrays = MeshArrays(self.mesh)
-            self.a = a_form(self.fes, self.v, self.model.eta)
-            self.b = b_form(self.fes, self.u, self.model.eps)
-            self.a.Assemble()
-            self.b.Assemble()
-            self.assembler = LumpedAssembler(self.arrays, self.a.mat)
+            # One NGSolve assembly of a_j builds the graph; b_j has the same graph, and both
+            # get their values from the vectorised assembler (equal to a_form and b_form,
+            # checked in tests/test_forms.py).
+            self.a_matrix = a_form(self.fes, self.v, self.model.eta).Assemble().mat
+            self.b_matrix = self.a_matrix.CreateMatrix()
+            self.assembler = LumpedAssembler(self.arrays, self.a_matrix)
             self.region_dofs = {
                 name: np.array(self.fes.GetDofs(self.mesh.Materials(name)), dtype=bool)
                 for name in self.loads
@@ -111,20 +122,33 @@ class ATState:
                     else self.mesh.Boundaries(self.crack)
                 )
                 self.initial_crack = np.array(self.fes.GetDofs(region), dtype=bool)
-            self._a_inverse = None
-            self._b_inverse = None
-            self._b_free: np.ndarray | None = None
-            self._residual = self.a.mat.CreateColVector()
+            self._edges = None
+            self._a_solver: LaggedCholesky | None = None
+            self._b_solver: LaggedCholesky | None = None
+            self._residual = self.a_matrix.CreateColVector()
+            self._correction = self.a_matrix.CreateColVector()
 
     def _pulled_vertices(self, region: str, shift: float = 1e-9):
-        """Return mesh points next to each vertex inside each element of ``region``."""
+        """Return mapped points next to each vertex inside each element of ``region``.
+
+        The reference points (1 − 2δ, δ), (δ, 1 − 2δ), (δ, δ) lie next to the reference vertices,
+        which NGSolve maps to the element's netgen nodes in order.
+        """
+        rule = IntegrationRule(
+            points=[(1 - 2 * shift, shift), (shift, 1 - 2 * shift), (shift, shift)],
+            weights=[1, 1, 1],
+        )
+        points = self.mesh.MapToAllElements({TRIG: rule}, self.mesh.Materials(region))
         index = self.mesh.ngmesh.Elements2D().NumPy()["index"]
         material = list(self.mesh.GetMaterials()).index(region) + 1
-        elements = self.arrays.elements[index == material]
-        xy = self.arrays.coords[elements]
-        pulled = (1 - 3 * shift) * xy + shift * xy.sum(axis=1, keepdims=True)
-        pulled = pulled.reshape(-1, 2)
-        return self.mesh(pulled[:, 0], pulled[:, 1]), elements.ravel()
+        return points, self.arrays.elements[index == material].ravel()
+
+    @property
+    def edges(self) -> EdgeTopology:
+        """Edge topology of the mesh for the estimators, built on first use per mesh."""
+        if self._edges is None:
+            self._edges = EdgeTopology(self.arrays)
+        return self._edges
 
     # -- views ------------------------------------------------------------------------------
     @property
@@ -168,18 +192,17 @@ class ATState:
     def solve_u(self) -> None:
         """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1)."""
         with self.timer("assembly"):
-            self.a.mat.AsVector().FV().NumPy()[:] = self.assembler.a_values(
+            self.a_matrix.AsVector().FV().NumPy()[:] = self.assembler.a_values(
                 self.v_values, self.model.eta
             )
         with self.timer("solve"):
-            if self._a_inverse is None:
-                self._a_inverse = self.a.mat.Inverse(
-                    BitArray(~self.dirichlet), inverse="sparsecholesky"
-                )
+            if self._a_solver is None:
+                self._a_solver = LaggedCholesky(self.a_matrix, ~self.dirichlet, self.max_cg)
             else:
-                self._a_inverse.Update()
-            self._residual.data = -1 * (self.a.mat * self.u.vec)
-            self.u.vec.data += self._a_inverse * self._residual
+                self._a_solver.values_changed()
+            self._residual.data = -1 * (self.a_matrix * self.u.vec)
+            self._a_solver.solve(self._residual, self._correction)
+            self.u.vec.data += self._correction
 
     def solve_v(self, crack: np.ndarray) -> None:
         """v-step: minimise I_j(u, ·) over X_{j,CR} (Algorithm 1, step 2.2).
@@ -193,17 +216,19 @@ class ATState:
         with self.timer("assembly"):
             grad_u = arrays.gradient(self.u_values)
             values = self.assembler.b_values((grad_u**2).sum(axis=1), self.model.eps)
-            self.b.mat.AsVector().FV().NumPy()[:] = values
+            self.b_matrix.AsVector().FV().NumPy()[:] = values
+            self.v_values[crack] = 0.0
             rhs = self._residual.FV().NumPy()
             rhs[:] = self.model.alpha * arrays.mass
         with self.timer("solve"):
             free = ~crack
-            if self._b_inverse is None or not np.array_equal(free, self._b_free):
-                self._b_inverse = self.b.mat.Inverse(BitArray(free), inverse="sparsecholesky")
-                self._b_free = free
+            if self._b_solver is None or not np.array_equal(free, self._b_solver.free):
+                self._b_solver = LaggedCholesky(self.b_matrix, free, self.max_cg)
             else:
-                self._b_inverse.Update()
-            self.v.vec.data = self._b_inverse * self._residual
+                self._b_solver.values_changed()
+            self._residual.data -= self.b_matrix * self.v.vec
+            self._b_solver.solve(self._residual, self._correction)
+            self.v.vec.data += self._correction
 
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
@@ -228,10 +253,10 @@ class ATState:
         energy with respect to a uniform shift of u on that region; ``force`` = 2 r·∂g/∂t is the
         derivative of the bulk energy with respect to the load parameter t.
         """
-        self.a.mat.AsVector().FV().NumPy()[:] = self.assembler.a_values(
+        self.a_matrix.AsVector().FV().NumPy()[:] = self.assembler.a_values(
             self.v_values, self.model.eta
         )
-        self._residual.data = self.a.mat * self.u.vec
+        self._residual.data = self.a_matrix * self.u.vec
         residual = 2 * self._residual.FV().NumPy()
         forces = {
             f"force_{name}": float(residual[dofs].sum()) for name, dofs in self.region_dofs.items()
@@ -252,3 +277,31 @@ class ATState:
             "v_min": float(v.min()),
             "v_max": float(v.max()),
         }
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def solver_state(self) -> dict[str, np.ndarray]:
+        """Return the matrix values behind each lagged factorisation and the v-step's free DOFs.
+
+        With ``max_cg > 0`` a factorisation outlives its load step; a resumed run rebuilds it
+        from these values to repeat the uninterrupted run exactly (:mod:`ngat.checkpoint`).
+        """
+        saved = {}
+        if self._a_solver is not None:
+            saved["a_factored"] = self._a_solver.factored_values
+        if self._b_solver is not None:
+            saved["b_factored"] = self._b_solver.factored_values
+            saved["b_free"] = self._b_solver.free
+        return saved
+
+    def restore_solver_state(self, saved: Mapping[str, np.ndarray]) -> None:
+        """Rebuild the lagged factorisations from :meth:`solver_state`.
+
+        The next solve rewrites the matrix values and so starts from a stale factorisation, as
+        it would have in the uninterrupted run.
+        """
+        if "a_factored" in saved:
+            self.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
+            self._a_solver = LaggedCholesky(self.a_matrix, ~self.dirichlet, self.max_cg)
+        if "b_factored" in saved:
+            self.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
+            self._b_solver = LaggedCholesky(self.b_matrix, saved["b_free"], self.max_cg)

@@ -1,0 +1,285 @@
+"""Checkpoints: after each load step, everything a resumed run needs to continue exactly.
+
+A checkpoint is one file, ``checkpoint.npz`` in the results folder, written to a temporary file
+and renamed over the old one, so a run killed at any moment leaves either the previous or the new
+checkpoint, complete. It holds the last finished step, the records (rows of ``energies.csv``)
+and summary entries so far, the nodal values of u, v and the previous step's v (which defines
+CR), the lagged Cholesky factorisations' matrix values (they outlive a load step, see
+:meth:`ngat.state.ATState.solver_state`) and the mesh.
+
+The mesh is stored as the list of its refinements — the marked elements of every
+``mesh.Refine()`` — plus its vertex coordinates as a check. A resumed run meshes the scene again
+and replays the refinements: Netgen's bisection keeps, per element, the edge to bisect next
+(newest-vertex bisection), which a mesh file (``ngmesh.Save``) does not store, so a reloaded
+mesh would be refined differently from then on (and the ``.vol`` file rounds the coordinates in
+the last bit). Replaying gives the identical mesh, numbering and bisection state, which the
+coordinates check.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import ngsolve
+import numpy as np
+
+from ngat.output import OutputError, check_results_folder, times_summary, write_atomic
+from ngat.state import ATState
+
+__all__ = [
+    "Checkpoint",
+    "save_checkpoint",
+    "load_checkpoint",
+    "finished_steps",
+    "prepare_resume",
+    "remove_checkpoint",
+    "replay_refinements",
+    "restore_state",
+    "restore_energies",
+    "CHECKPOINT",
+]
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT = "checkpoint.npz"
+
+
+@dataclass
+class Checkpoint:
+    """The content of ``checkpoint.npz``.
+
+    Attributes
+    ----------
+    step
+        Index of the last finished load step.
+    identity
+        ``scene``, ``parameters`` and ``times`` of the run, as in ``summary.json``.
+    records
+        One dictionary per finished step (the rows of ``energies.csv``).
+    summary
+        Summary entries gathered during the steps (refinement history, fracture time, ...).
+    fields
+        ``u``, ``v``, ``v_prev``: nodal values.
+    refinements
+        Marked element indices of every refinement, in order.
+    coords
+        Vertex coordinates of the mesh (checked after the replay).
+    solvers
+        :meth:`ngat.state.ATState.solver_state`.
+    """
+
+    step: int
+    identity: dict[str, Any]
+    records: list[dict[str, Any]]
+    summary: dict[str, Any]
+    fields: dict[str, np.ndarray]
+    refinements: list[np.ndarray]
+    coords: np.ndarray
+    solvers: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _plain(value: Any) -> Any:
+    """JSON encoder fallback: numpy scalars and arrays to Python values."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot store {type(value).__name__} in a checkpoint")
+
+
+def save_checkpoint(
+    folder: Path,
+    state: ATState,
+    step: int,
+    records: Sequence[dict[str, Any]],
+    summary: dict[str, Any],
+) -> None:
+    """Write ``folder/checkpoint.npz`` atomically (temporary file, fsync, rename).
+
+    Parameters
+    ----------
+    folder
+        Results folder.
+    state
+        Fields, mesh, refinement list and solvers after the step.
+    step
+        Index of the step just finished.
+    records
+        The records of steps 0, …, ``step``.
+    summary
+        The run's summary so far (its ``scene``, ``parameters`` and ``times`` identify the run).
+    """
+    meta = {
+        "version": 1,
+        "step": int(step),
+        "identity": {key: summary[key] for key in ("scene", "parameters", "times")},
+        "records": list(records),
+        "summary": summary,
+    }
+    marks = state.refinements
+    arrays = {
+        "meta": np.array(json.dumps(meta, default=_plain)),
+        "u": state.u_values,
+        "v": state.v_values,
+        "v_prev": state.v_prev.vec.FV().NumPy(),
+        "coords": state.mesh.ngmesh.Coordinates(),
+        "marks": np.concatenate(marks) if marks else np.zeros(0, dtype=np.int64),
+        "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
+        **{f"solver_{key}": value for key, value in state.solver_state().items()},
+    }
+    path = Path(folder) / CHECKPOINT
+    tmp = path.with_name(f".{CHECKPOINT}.tmp")
+    with open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def load_checkpoint(folder: Path) -> Checkpoint | None:
+    """Return the checkpoint of ``folder``, or ``None`` if it has none.
+
+    Raises
+    ------
+    OutputError
+        If the file cannot be read (it is only ever replaced whole, so this means it was
+        changed by something else).
+    """
+    path = Path(folder) / CHECKPOINT
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            offsets = data["mark_offsets"]
+            marks = data["marks"]
+            solvers = {
+                key.removeprefix("solver_"): data[key]
+                for key in data.files
+                if key.startswith("solver_")
+            }
+            return Checkpoint(
+                step=meta["step"],
+                identity=meta["identity"],
+                records=meta["records"],
+                summary=meta["summary"],
+                fields={key: data[key] for key in ("u", "v", "v_prev")},
+                refinements=[marks[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)],
+                coords=data["coords"],
+                solvers=solvers,
+            )
+    except (OSError, ValueError, KeyError) as error:
+        raise OutputError(
+            f"checkpoint '{path}' is unreadable ({error}); start the run afresh with --overwrite"
+        ) from None
+
+
+def finished_steps(folder: Path) -> int:
+    """Return the number of load steps the checkpoint of ``folder`` holds (0 without one)."""
+    path = Path(folder) / CHECKPOINT
+    if not path.exists():
+        return 0
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return json.loads(str(data["meta"]))["step"] + 1
+    except (OSError, ValueError, KeyError):
+        return 0
+
+
+def remove_checkpoint(folder: Path) -> None:
+    """Delete the checkpoint of ``folder`` (a fresh run must not leave a stale one)."""
+    (Path(folder) / CHECKPOINT).unlink(missing_ok=True)
+
+
+def check_identity(
+    checkpoint: Checkpoint, scene: str, parameters: dict[str, Any], times: Sequence[float]
+) -> None:
+    """Raise :class:`OutputError` unless the checkpoint belongs to this scene and parameters."""
+    ours = {"scene": scene, "parameters": parameters, "times": times_summary(times)}
+    differ = [key for key in ours if checkpoint.identity.get(key) != ours[key]]
+    if differ:
+        raise OutputError(
+            f"cannot resume: the checkpoint belongs to a run with another {' and '.join(differ)}; "
+            "resume with the same scene, --quick and --set values, or start afresh with --overwrite"
+        )
+
+
+def prepare_resume(
+    folder: Path, scene: str, parameters: dict[str, Any], times: Sequence[float]
+) -> Checkpoint | None:
+    """Check that ``folder`` holds this run; cut ``energies.csv`` back to its checkpoint.
+
+    Parameters
+    ----------
+    folder
+        Results folder of the interrupted run.
+    scene, parameters, times
+        Scene name, flat parameters and load times of the run to resume.
+
+    Returns
+    -------
+    Checkpoint or None
+        The checkpoint; ``None`` if the run was interrupted before its first step ended.
+
+    Raises
+    ------
+    OutputError
+        If the folder holds no run, or one of another scene, parameters or times.
+    """
+    check_results_folder(folder, scene, parameters, times, mode="resume")
+    checkpoint = load_checkpoint(folder)
+    if checkpoint is not None:
+        check_identity(checkpoint, scene, parameters, times)
+        restore_energies(folder, checkpoint.records)
+        log.info("resuming %s after step %d", folder, checkpoint.step)
+    return checkpoint
+
+
+def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
+    """Refine the scene's initial mesh as the interrupted run did; check the coordinates.
+
+    Raises
+    ------
+    OutputError
+        If the replayed mesh differs from the checkpoint's (the scene or Netgen changed).
+    """
+    for marked in checkpoint.refinements:
+        flags = np.zeros(mesh.ne, dtype=bool)
+        flags[marked] = True
+        mesh.SetRefinementFlags(flags.tolist())
+        mesh.Refine()
+    coords = mesh.ngmesh.Coordinates()
+    if coords.shape != checkpoint.coords.shape or not np.array_equal(coords, checkpoint.coords):
+        raise OutputError(
+            "cannot resume: meshing the scene and replaying its refinements does not give the "
+            "checkpoint's mesh (was the scene or Netgen changed?); start afresh with --overwrite"
+        )
+
+
+def restore_state(state: ATState, checkpoint: Checkpoint) -> None:
+    """Set u, v, v(t_{k−1}), the refinement list and the factorisations from the checkpoint."""
+    state.u_values[:] = checkpoint.fields["u"]
+    state.v_values[:] = checkpoint.fields["v"]
+    state.v_prev.vec.FV().NumPy()[:] = checkpoint.fields["v_prev"]
+    state.refinements[:] = [np.asarray(m) for m in checkpoint.refinements]
+    state.restore_solver_state(checkpoint.solvers)
+
+
+def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
+    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row)."""
+    path = Path(folder) / "energies.csv"
+    if not records:
+        path.unlink(missing_ok=True)
+        return
+    # The columns are the keys of the first record, as ResultsWriter fixes them.
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(records[0]), extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(records)
+    write_atomic(path, text.getvalue())

@@ -1,0 +1,519 @@
+"""Pictures of a results folder, drawn without a GUI from its files alone.
+
+:func:`plot_results` reads ``energies.csv`` and the VTK series (``fields.pvd``, ``fields/*.vtu``)
+of a finished or partial run and writes PNGs into the folder:
+
+- ``energies.png``: bulk, surface and total energy, the reaction force, the number of elements
+  and the alternating-minimisation iterations against the load time t;
+- ``v_final.png`` and ``v_t<t>.png``: the phase field v at the last step and at a few load times,
+  rendered off-screen by pyvista (matplotlib ``tripcolor`` where VTK cannot render off-screen);
+- ``mesh_final.png``: the edges of the last mesh; ``mesh_zoom.png``: a window around a crack tip.
+
+Whatever is missing (no CSV yet, rows cut short by a crash, VTUs named by ``fields.pvd`` but
+absent) is skipped with a log message. Matplotlib figures are built with ``Figure`` objects and
+never through ``pyplot``, so the caller's backend is left alone.
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+import json
+import logging
+import subprocess
+import sys
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pyvista
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.tri import Triangulation
+
+from ngat.crack import crack_tips, mesh_edges
+
+__all__ = [
+    "plot_results",
+    "read_energies",
+    "field_series",
+    "offscreen_rendering_works",
+    "PlotError",
+]
+
+log = logging.getLogger(__name__)
+
+CRACK_THRESHOLD = 0.1
+"""Vertices with v below this are cracked (as in :mod:`ngat.crack`)."""
+
+ZOOM_FRACTION = 0.05
+"""Default zoom radius as a fraction of the diagonal of the body's bounding box."""
+
+DPI = 200
+
+
+class PlotError(ValueError):
+    """The folder holds nothing to plot."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One stored step of the VTK series: its step number, load time and VTU file."""
+
+    step: int
+    t: float
+    path: Path
+
+
+def read_energies(path: Path) -> dict[str, np.ndarray]:
+    """Return the columns of ``energies.csv`` as float arrays, keeping only complete rows.
+
+    A row is complete when every column has a value; a crash while a row is written leaves an
+    incomplete last row, which is dropped. ``True``/``False`` become 1/0.
+
+    Parameters
+    ----------
+    path
+        The CSV file.
+    """
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        columns = reader.fieldnames or []
+        rows = []
+        for row in reader:
+            try:
+                rows.append([_number(row[c]) for c in columns])
+            except (TypeError, ValueError):
+                log.info("%s: skipping an incomplete row %s", path, row.get("step"))
+    table = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    return {c: table[:, i] for i, c in enumerate(columns)}
+
+
+def _number(text: str | None) -> float:
+    if text in ("True", "False"):
+        return float(text == "True")
+    return float(text)
+
+
+def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) -> list[Frame]:
+    """Return the stored steps whose VTU exists, in load order.
+
+    ``fields.pvd`` gives the load times; without it the VTUs are found by name
+    (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the step number
+    stands in for t when there is no such row).
+
+    Parameters
+    ----------
+    folder
+        Results folder.
+    energies
+        Columns of ``energies.csv``, if read.
+    """
+    folder = Path(folder)
+    frames = []
+    pvd = folder / "fields.pvd"
+    if pvd.exists():
+        for dataset in ET.parse(pvd).getroot().iter("DataSet"):
+            path = folder / dataset.get("file")
+            frames.append(Frame(_step_of(path), float(dataset.get("timestep")), path))
+    else:
+        times = {}
+        if energies is not None and "step" in energies and "t" in energies:
+            times = dict(zip(energies["step"].astype(int).tolist(), energies["t"], strict=True))
+        for path in sorted((folder / "fields").glob("step_*.vtu")):
+            step = _step_of(path)
+            frames.append(Frame(step, float(times.get(step, step)), path))
+    missing = [f.path.name for f in frames if not f.path.exists()]
+    if missing:
+        log.info("%s: %d VTU files named but absent (%s ...)", folder, len(missing), missing[0])
+    return [f for f in frames if f.path.exists()]
+
+
+def _step_of(path: Path) -> int:
+    try:
+        return int(path.stem.rsplit("_", 1)[-1])
+    except ValueError:
+        return -1
+
+
+@functools.cache
+def offscreen_rendering_works() -> bool:
+    """Return whether VTK can render off-screen here, tried once in a child process.
+
+    A VTK without a usable OpenGL context (no display, no EGL or OSMesa) may abort the process
+    instead of raising, so the trial runs in a separate interpreter.
+    """
+    probe = (
+        "import pyvista\n"
+        "p = pyvista.Plotter(off_screen=True, window_size=(32, 32))\n"
+        "p.add_mesh(pyvista.Sphere())\n"
+        "assert p.screenshot(return_img=True).std() > 0\n"
+    )
+    try:
+        result = subprocess.run(
+            [sys.executable, "-c", probe], capture_output=True, timeout=120, check=False
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return result.returncode == 0
+
+
+def plot_results(
+    folder: str | Path,
+    times: Sequence[float] | None = None,
+    zoom: tuple[float, float, float] | None = None,
+    slits: Sequence | None = None,
+    renderer: str = "auto",
+) -> list[Path]:
+    """Draw the pictures of a finished or partial results folder.
+
+    Parameters
+    ----------
+    folder
+        Results folder of ``ngat run``.
+    times
+        Load times of the ``v_t<t>.png`` pictures (each mapped to the nearest stored step).
+        Default: four steps spread evenly over the stored ones, the first excluded.
+    zoom
+        ``(x, y, r)``: centre and half-width of ``mesh_zoom.png``. Default: centre at the tip of
+        the first slit's crack (:func:`ngat.crack.crack_tips`) when the slits are known, else at
+        the smallest element with a cracked vertex (v < 0.1; where adaptive refinement is finest),
+        else at the smallest element; half-width 5 % of the bounding-box diagonal.
+    slits
+        Slits as ``((x_mouth, y_mouth), (x_tip, y_tip))`` segments. Default: the ``slits`` of
+        the scene named in ``summary.json``, if it has any.
+    renderer
+        ``"pyvista"``, ``"matplotlib"`` or ``"auto"`` (pyvista if off-screen rendering works).
+
+    Returns
+    -------
+    list of Path
+        The pictures written.
+
+    Raises
+    ------
+    PlotError
+        If the folder holds neither energies nor fields, or ``renderer`` is unknown.
+    """
+    if renderer not in ("auto", "pyvista", "matplotlib"):
+        raise PlotError(f"renderer must be 'auto', 'pyvista' or 'matplotlib', got '{renderer}'")
+    folder = Path(folder)
+    written = []
+    energies = None
+    if (folder / "energies.csv").exists():
+        energies = read_energies(folder / "energies.csv")
+        if len(energies.get("t", ())):
+            written.append(plot_energies(energies, folder / "energies.png"))
+        else:
+            log.info("%s: energies.csv has no complete row", folder)
+    frames = field_series(folder, energies) if folder.is_dir() else []
+    if not written and not frames:
+        raise PlotError(f"'{folder}' holds no energies.csv rows and no fields to plot")
+    if not frames:
+        return written
+    if renderer == "auto":
+        renderer = "pyvista" if offscreen_rendering_works() else "matplotlib"
+        if renderer == "matplotlib":
+            log.warning("VTK cannot render off-screen here: drawing v with matplotlib")
+    while frames and (grid := _read(frames[-1])) is None:
+        frames.pop()
+    if not frames:
+        return written
+    final = frames[-1]
+    written.append(plot_field(grid, final.t, folder / "v_final.png", renderer))
+    for frame in _chosen_frames(frames[:-1], times):
+        if (snapshot := _read(frame)) is not None:
+            path = folder / f"v_t{frame.t:.4f}.png"
+            written.append(plot_field(snapshot, frame.t, path, renderer))
+    points, triangles = _triangles(grid)
+    written.append(plot_mesh(points, triangles, None, final.t, folder / "mesh_final.png"))
+    if zoom is None:
+        zoom = default_zoom(points, triangles, grid.point_data["v"], _scene_slits(folder, slits))
+    v = np.asarray(grid.point_data["v"])
+    written.append(plot_mesh(points, triangles, v, final.t, folder / "mesh_zoom.png", zoom))
+    log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
+    return written
+
+
+def _read(frame: Frame) -> pyvista.UnstructuredGrid | None:
+    """Return the frame's grid, or ``None`` if the VTU is unreadable (cut short by a crash)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            grid = pyvista.read(frame.path)
+        except Exception as error:  # VTK readers raise many kinds of errors
+            log.info("%s: unreadable (%s)", frame.path, error)
+            return None
+    if grid.n_cells == 0 or "v" not in grid.point_data:
+        log.info("%s: no cells or no field v; skipped", frame.path)
+        return None
+    return grid
+
+
+def _chosen_frames(frames: list[Frame], times: Sequence[float] | None) -> list[Frame]:
+    """Return the frames nearest to ``times``, or four spread evenly after the first."""
+    if not frames:
+        return []
+    if times is None:
+        index = np.round(np.linspace(0, len(frames), 6)[1:-1]).astype(int)
+        index = np.minimum(index, len(frames) - 1)
+    else:
+        t = np.array([f.t for f in frames])
+        index = np.abs(t[None, :] - np.asarray(times, dtype=float)[:, None]).argmin(axis=1)
+    return [frames[i] for i in np.unique(index)]
+
+
+def _scene_slits(folder: Path, slits: Sequence | None) -> Sequence:
+    """Return ``slits``, else the slits of the scene named in ``summary.json``, else ()."""
+    if slits is not None:
+        return slits
+    try:
+        from ngat.scene import load_scene
+
+        name = json.loads((folder / "summary.json").read_text())["scene"]
+        return tuple(getattr(load_scene(name), "slits", None) or ())
+    except (OSError, ValueError, KeyError, LookupError):
+        return ()
+
+
+def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
+    """Draw energies, reaction force, elements and iterations against t into ``path``.
+
+    Parameters
+    ----------
+    energies
+        Columns of ``energies.csv`` (:func:`read_energies`).
+    path
+        PNG file to write.
+    """
+    t = energies["t"]
+    fig = Figure(figsize=(7, 9), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True, height_ratios=[3, 2, 1.5, 1.5])
+    ax = axes[0]
+    for name, style in (("bulk", "-"), ("surface", "-"), ("total", "k-")):
+        if name in energies:
+            ax.plot(t, energies[name], style, label=name, marker=".", markersize=3)
+    ax.set_ylabel("energy")
+    ax.legend(loc="upper left", frameon=False)
+    ax = axes[1]
+    if "force" in energies:
+        ax.plot(t, energies["force"], "C3.-", markersize=3)
+    ax.set_ylabel("reaction force")
+    ax.axhline(0, color="0.7", lw=0.5)
+    ax = axes[2]
+    if "elements" in energies:
+        ax.step(t, energies["elements"], where="mid", color="C2")
+        ax.set_yscale("log")
+    ax.set_ylabel("elements")
+    ax = axes[3]
+    if "am_iterations" in energies:
+        ax.bar(t, energies["am_iterations"], width=0.8 * _spacing(t), color="C0")
+        ax.set_yscale("log")
+        if "converged" in energies and np.any(energies["converged"] == 0):
+            failed = energies["converged"] == 0
+            ax.plot(t[failed], energies["am_iterations"][failed], "rx", label="not converged")
+            ax.legend(loc="upper left", frameon=False)
+    ax.set_ylabel("AM iterations")
+    ax.set_xlabel("load time t")
+    for ax in axes:
+        ax.grid(True, lw=0.3, alpha=0.5)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def _spacing(t: np.ndarray) -> float:
+    return float(np.min(np.diff(t))) if len(t) > 1 else 1.0
+
+
+def _triangles(grid: pyvista.UnstructuredGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (n, 2) points and (ne, 3) triangles of a VTU read by pyvista."""
+    triangles = grid.cells_dict[pyvista.CellType.TRIANGLE]
+    return np.asarray(grid.points)[:, :2], np.asarray(triangles, dtype=np.int64)
+
+
+def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: str) -> Path:
+    """Draw the phase field v of one step, colour range [0, 1], into ``path``.
+
+    Parameters
+    ----------
+    grid
+        The step's VTU with point data ``v``.
+    t
+        Load time, for the title.
+    path
+        PNG file to write.
+    renderer
+        ``"pyvista"`` (off-screen VTK) or ``"matplotlib"`` (``tripcolor``).
+    """
+    if renderer == "pyvista":
+        return _plot_field_pyvista(grid, t, path)
+    points, triangles = _triangles(grid)
+    xmin, ymin = points.min(axis=0)
+    xmax, ymax = points.max(axis=0)
+    fig = Figure(figsize=(7, 7 * (ymax - ymin) / (xmax - xmin)), layout="constrained")
+    ax = fig.subplots()
+    image = ax.tripcolor(
+        Triangulation(points[:, 0], points[:, 1], triangles),
+        np.asarray(grid.point_data["v"]),
+        shading="gouraud",
+        cmap="viridis",
+        vmin=0,
+        vmax=1,
+    )
+    fig.colorbar(image, ax=ax, label="v", shrink=0.9)
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_title(f"v at t = {t:g}")
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def _plot_field_pyvista(grid: pyvista.UnstructuredGrid, t: float, path: Path) -> Path:
+    """Render v with VTK off-screen; the camera looks down z with parallel projection."""
+    xmin, xmax, ymin, ymax = grid.bounds[:4]
+    width, height = xmax - xmin, ymax - ymin
+    # The body fills the left BODY of the window (with a 5 % margin); the colour bar the rest.
+    body, margin = 0.82, 1.05
+    pixels_y = 1200
+    pixels_x = int(pixels_y * margin * width / height / body)
+    plotter = pyvista.Plotter(off_screen=True, window_size=(pixels_x, pixels_y))
+    try:
+        plotter.set_background("white")
+        plotter.add_mesh(
+            grid,
+            scalars="v",
+            cmap="viridis",
+            clim=(0, 1),
+            lighting=False,
+            scalar_bar_args={
+                "title": "v",
+                "vertical": True,
+                "position_x": 0.85,
+                "position_y": 0.1,
+                "width": 0.06,
+                "height": 0.8,
+                "fmt": "%.1f",
+                "n_labels": 6,
+                "title_font_size": 36,
+                "label_font_size": 28,
+                "color": "black",
+            },
+        )
+        label = (int(0.83 * pixels_x), int(0.025 * pixels_y))
+        plotter.add_text(f"t = {t:g}", position=label, font_size=14, color="black")
+        plotter.enable_parallel_projection()
+        camera = plotter.camera
+        window_width = margin * height * pixels_x / pixels_y
+        x = 0.5 * (xmin + xmax) + (0.5 - body / 2) * window_width
+        y = 0.5 * (ymin + ymax)
+        camera.focal_point = (x, y, 0.0)
+        camera.position = (x, y, 1.0)
+        camera.up = (0.0, 1.0, 0.0)
+        camera.parallel_scale = 0.5 * margin * height
+        plotter.reset_camera_clipping_range()
+        plotter.screenshot(str(path))
+    finally:
+        plotter.close()
+    return path
+
+
+def default_zoom(
+    points: np.ndarray, triangles: np.ndarray, v: np.ndarray, slits: Sequence = ()
+) -> tuple[float, float, float]:
+    """Return the default window ``(x, y, r)`` of ``mesh_zoom.png`` (see :func:`plot_results`).
+
+    Parameters
+    ----------
+    points, triangles
+        The VTU's points and triangles (points repeated per element, as NGSolve writes them).
+    v
+        Phase field at the points.
+    slits
+        Slit segments ``(mouth, tip)``; may be empty.
+    """
+    r = ZOOM_FRACTION * float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    coords, inverse = np.unique(points, axis=0, return_inverse=True)
+    elements = inverse.reshape(-1)[triangles]
+    xy = coords[elements]
+    diameter = np.linalg.norm(xy[:, [1, 2, 0]] - xy, axis=2).max(axis=1)
+    if len(slits):
+        # Coincident points are merged, so the two faces of a slit are joined here; the tip
+        # search only needs the crack set near the slit, where that makes no difference.
+        arrays = SimpleNamespace(
+            elements=elements, coords=coords, nv=len(coords), ne=len(elements), diameter=diameter
+        )
+        vertex_v = np.zeros(len(coords))
+        vertex_v[inverse.reshape(-1)] = v
+        x, y = crack_tips(arrays, vertex_v, [slits[0]], CRACK_THRESHOLD)[0]
+        return x, y, r
+    cracked = (np.asarray(v)[triangles] < CRACK_THRESHOLD).any(axis=1)
+    candidates = np.flatnonzero(cracked) if cracked.any() else np.arange(len(triangles))
+    finest = candidates[np.argmin(diameter[candidates])]
+    x, y = xy[finest].mean(axis=0)
+    return float(x), float(y), r
+
+
+def plot_mesh(
+    points: np.ndarray,
+    triangles: np.ndarray,
+    v: np.ndarray | None,
+    t: float,
+    path: Path,
+    zoom: tuple[float, float, float] | None = None,
+) -> Path:
+    """Draw the mesh edges, over v when given, whole or in the window ``zoom = (x, y, r)``.
+
+    Parameters
+    ----------
+    points, triangles
+        The VTU's points and triangles.
+    v
+        Phase field at the points, drawn under the edges; ``None`` for edges only.
+    t
+        Load time, for the title.
+    path
+        PNG file to write.
+    zoom
+        Centre and half-width of the window; ``None`` for the whole body.
+    """
+    coords, inverse = np.unique(points, axis=0, return_inverse=True)
+    edges = mesh_edges(inverse.reshape(-1)[triangles])
+    segments = coords[edges]
+    if zoom is None:
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    else:
+        x, y, r = zoom
+        lo, hi = np.array([x - r, y - r]), np.array([x + r, y + r])
+        inside = ((segments.max(axis=1) >= lo) & (segments.min(axis=1) <= hi)).all(axis=1)
+        segments = segments[inside]
+    width, height = hi - lo
+    fig = Figure(figsize=(7, 7 * height / width + (0.4 if v is None else 0)), layout="constrained")
+    ax = fig.subplots()
+    if v is not None:
+        image = ax.tripcolor(
+            Triangulation(points[:, 0], points[:, 1], triangles),
+            v,
+            shading="gouraud",
+            cmap="viridis",
+            vmin=0,
+            vmax=1,
+        )
+        fig.colorbar(image, ax=ax, label="v", shrink=0.9)
+    # A line about a twentieth of its edge's length on paper: small elements show as hairlines
+    # and leave the colour of v (or the white of the page) visible between them.
+    length = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    linewidth = np.clip(20.0 * length / width, 0.03, 0.4)
+    color = (1.0, 1.0, 1.0, 0.5) if v is not None else "black"
+    ax.add_collection(LineCollection(segments, colors=color, linewidths=linewidth))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    where = "" if zoom is None else f", window ({zoom[0]:.3g}, {zoom[1]:.3g}) ± {zoom[2]:.3g}"
+    ax.set_title(f"mesh at t = {t:g}: {len(triangles)} elements{where}")
+    fig.savefig(path, dpi=DPI)
+    return path

@@ -1,0 +1,97 @@
+"""Crack measures on the two-slits mesh with phase fields drawn by hand."""
+
+import numpy as np
+import pytest
+from ngsolve import H1
+
+from geometries.two_slits import SLITS
+from ngat.crack import components, connects, crack_tips, mesh_edges
+from ngat.forms import MeshArrays
+from ngat.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def two_slits():
+    mesh = load_scene("two-slits").make_mesh(0.25)
+    fes = H1(mesh, order=1)
+    regions = {
+        name: np.array(fes.GetDofs(mesh.Materials(name)), dtype=bool) for name in ("left", "right")
+    }
+    return MeshArrays(mesh), regions
+
+
+def band(coords, a, b, half_width):
+    """Return v = 0 within ``half_width`` of the segment [a, b], v = 1 elsewhere."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    s = np.clip((coords - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    distance = np.linalg.norm(coords - (a + s[:, None] * (b - a)), axis=1)
+    return np.where(distance < half_width, 0.0, 1.0)
+
+
+def test_mesh_edges_are_unique_and_sorted(two_slits):
+    arrays, _ = two_slits
+    edges = mesh_edges(arrays.elements)
+    assert np.all(edges[:, 0] < edges[:, 1])
+    assert len(np.unique(edges, axis=0)) == len(edges)
+    # Every edge bounds one or two triangles: 3 ne = 2 (interior edges) + boundary edges.
+    all_edges = np.sort(arrays.elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(all_edges, axis=0, return_counts=True)
+    assert set(counts) == {1, 2} and len(counts) == len(edges)
+
+
+def test_components_never_cross_a_slit(two_slits):
+    arrays, _ = two_slits
+    x, y = arrays.coords.T
+    # A thin strip hugging both faces of the lower slit, below its tip: two components.
+    strip = (np.abs(x - 2) < 0.2) & (y > 0.5) & (y < 1.5)
+    labels = components(arrays, strip)
+    left = np.unique(labels[strip & (x < 2 - 1e-9)])
+    right = np.unique(labels[strip & (x > 2 + 1e-9)])
+    assert len(np.intersect1d(left, right)) == 0
+    assert np.all(labels[~strip] == -1)
+
+
+def test_intact_body_has_the_slit_tips_and_connects(two_slits):
+    arrays, regions = two_slits
+    v = np.ones(arrays.nv)
+    assert crack_tips(arrays, v, SLITS) == [(2.0, 2.0), (4.0, 4.0)]
+    assert connects(arrays, v, regions["left"], regions["right"])
+
+
+def test_crack_tip_is_the_end_of_the_band_grown_from_the_slit(two_slits):
+    arrays, regions = two_slits
+    v = band(arrays.coords, (2, 2), (2.8, 2.8), 0.2)
+    # A damaged spot that does not touch any slit changes nothing.
+    v = np.minimum(v, band(arrays.coords, (5, 1), (5.3, 1.3), 0.2))
+    tips = crack_tips(arrays, v, SLITS)
+    assert np.linalg.norm(np.subtract(tips[0], (2.8, 2.8))) < 0.2 + 0.25
+    assert np.hypot(*np.subtract(tips[0], (2, 0))) > np.hypot(0.8, 2.8) - 1e-9
+    assert tips[1] == (4.0, 4.0)
+    assert connects(arrays, v, regions["left"], regions["right"])
+
+
+def test_joined_cracks_break_the_body(two_slits):
+    arrays, regions = two_slits
+    v = band(arrays.coords, (2, 2), (4, 4), 0.2)
+    assert not connects(arrays, v, regions["left"], regions["right"])
+    tips = crack_tips(arrays, v, SLITS)
+    # Each slit's crack now ends at the other slit's tip.
+    assert np.linalg.norm(np.subtract(tips[0], (4, 4))) < 0.45
+    assert np.linalg.norm(np.subtract(tips[1], (2, 2))) < 0.45
+
+
+def test_a_slit_is_a_cut_of_the_sound_set(two_slits):
+    arrays, regions = two_slits
+    # A band from the lower slit's tip to the top: with the slit it cuts the body in two...
+    v = band(arrays.coords, (2, 2), (2, 6), 0.2)
+    assert not connects(arrays, v, regions["left"], regions["right"])
+    # ...but a gap of a few elements between band and slit tip leaves it whole.
+    v = band(arrays.coords, (2, 3), (2, 6), 0.2)
+    assert connects(arrays, v, regions["left"], regions["right"])
+
+
+def test_threshold_decides_what_is_cracked(two_slits):
+    arrays, regions = two_slits
+    v = 0.5 * band(arrays.coords, (2, 2), (4, 4), 0.2) + 0.05
+    assert not connects(arrays, v, regions["left"], regions["right"], threshold=0.1)
+    assert connects(arrays, v, regions["left"], regions["right"], threshold=0.01)

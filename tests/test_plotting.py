@@ -1,0 +1,100 @@
+"""``ngat plot``: the pictures of a finished and of a partial quick two-slits run."""
+
+import shutil
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from ngat.cli import main
+from ngat.plotting import PlotError, field_series, plot_results, read_energies
+
+PICTURES = ["energies.png", "v_final.png", "mesh_final.png", "mesh_zoom.png"]
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plot") / "two-slits-quick"
+    assert main(["run", "two-slits", "--quick", "--quiet", "--out", str(folder)]) == 0
+    return folder
+
+
+def assert_picture(path):
+    assert path.exists(), path
+    assert path.stat().st_size > 10_000, path
+    pixels = imread(path)[..., :3]
+    assert pixels.std() > 0.02, f"{path.name} is (nearly) one colour"
+
+
+def test_plot_command_draws_every_picture(run_folder, tmp_path):
+    folder = tmp_path / "run"
+    shutil.copytree(run_folder, folder)
+    assert main(["plot", str(folder), "--quiet"]) == 0
+    for name in PICTURES:
+        assert_picture(folder / name)
+    snapshots = sorted(folder.glob("v_t*.png"))
+    assert len(snapshots) == 4
+    for path in snapshots:
+        assert_picture(path)
+
+
+def dark_fraction(path):
+    """Return the share of pixels left of the colour bar in viridis' colour of v ≈ 0."""
+    pixels = imread(path)[..., :3]
+    body = pixels[:, : int(0.78 * pixels.shape[1])].reshape(-1, 3)
+    return ((body[:, 0] < 0.35) & (body[:, 1] < 0.1) & (body[:, 2] > 0.25)).mean()
+
+
+def test_v_pictures_show_the_crack_once_it_is_there(run_folder, tmp_path):
+    folder = tmp_path / "run"
+    shutil.copytree(run_folder, folder)
+    plot_results(folder, times=[0.3])
+    assert dark_fraction(folder / "v_t0.3000.png") == 0
+    assert dark_fraction(folder / "v_final.png") > 0.001
+
+
+def test_chosen_times_and_zoom(run_folder, tmp_path):
+    folder = tmp_path / "run"
+    shutil.copytree(run_folder, folder)
+    written = plot_results(folder, times=[0.52, 1.4], zoom=(2.0, 2.0, 0.3))
+    names = {p.name for p in written}
+    assert {"v_t0.5000.png", "v_t1.4000.png"} <= names
+    assert len([n for n in names if n.startswith("v_t")]) == 2
+
+
+def test_partial_run_is_plotted(run_folder, tmp_path):
+    # A crash: the last rows are lost, the last one cut in half, and VTUs named by fields.pvd
+    # are missing.
+    folder = tmp_path / "partial"
+    shutil.copytree(run_folder, folder)
+    (folder / "summary.json").unlink()
+    lines = (folder / "energies.csv").read_text().splitlines()
+    (folder / "energies.csv").write_text("\n".join(lines[:20]) + "\n" + lines[20][:15])
+    for step in range(24, 33):
+        (folder / "fields" / f"step_{step:04d}.vtu").unlink()
+    energies = read_energies(folder / "energies.csv")
+    assert len(energies["t"]) == 19
+    frames = field_series(folder, energies)
+    assert [f.step for f in frames] == list(range(24))
+    assert np.isclose(frames[-1].t, 1.15)
+    assert main(["plot", str(folder), "--quiet"]) == 0
+    for name in PICTURES:
+        assert_picture(folder / name)
+
+
+def test_fields_without_pvd_and_csv_without_rows(run_folder, tmp_path):
+    folder = tmp_path / "bare"
+    shutil.copytree(run_folder, folder)
+    (folder / "fields.pvd").unlink()
+    lines = (folder / "energies.csv").read_text().splitlines()
+    (folder / "energies.csv").write_text(lines[0] + "\n")
+    last = folder / "fields" / "step_0032.vtu"
+    last.write_bytes(last.read_bytes()[:100_000])  # a VTU cut short
+    written = plot_results(folder, times=[])
+    assert [p.name for p in written] == ["v_final.png", "mesh_final.png", "mesh_zoom.png"]
+
+
+def test_empty_folder_is_an_input_error(tmp_path):
+    with pytest.raises(PlotError):
+        plot_results(tmp_path)
+    assert main(["plot", str(tmp_path / "nothing")]) == 2
