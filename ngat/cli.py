@@ -53,7 +53,8 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
     existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
     if args.resume and existing.get("status") == "completed":
-        console.print(f"nothing to resume: the run in {folder} is complete")
+        if not args.quiet:
+            console.print(f"nothing to resume: the run in {folder} is complete")
         return 0
     done = finished_steps(folder) if args.resume else 0
     columns = [

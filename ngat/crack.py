@@ -56,8 +56,7 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     np.ndarray
         (nv,) int labels: the component of each vertex of the set, ``-1`` outside it.
     """
-    edges = mesh_edges(arrays.elements)
-    edges = edges[mask[edges].all(axis=1)]
+    edges = arrays.edges[mask[arrays.edges].all(axis=1)]
     graph = coo_matrix(
         (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])),
         shape=(arrays.nv, arrays.nv),

@@ -16,6 +16,7 @@ from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
+import ngsolve
 import numpy as np
 
 from ngat import __version__
@@ -115,6 +116,10 @@ def run(
     RunResult
         Records, summary and the final state.
     """
+    # One NGSolve thread: with more, the sparse Cholesky factorisation adds in an order that
+    # varies from run to run, so runs (and resumed runs) would not repeat bit for bit; on two
+    # cores one thread was also faster (0.042 s against 0.075 s per half-step at 30k DOFs).
+    ngsolve.SetNumThreads(1)
     timer = PhaseTimer()
     checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
     writer = ResultsWriter(folder, append=checkpoint is not None)
@@ -166,6 +171,7 @@ def run(
                 nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),
                 cracked_vertices=int(crack.sum()),
+                v_bound_active=state.bound_active,
             )
             record.update(crack_measures(state, scene))
             if "fracture_time" not in summary and record.get("connected") is False:

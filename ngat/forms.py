@@ -11,6 +11,8 @@ part; a test checks that these values equal the assembled forms.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import ngsolve
 import numpy as np
 from ngsolve import TRIG, BilinearForm, IntegrationRule, dx, grad
@@ -110,6 +112,12 @@ class MeshArrays:
         )
         edges = xy[:, [1, 2, 0]] - xy
         self.diameter = np.sqrt((edges**2).sum(axis=2)).max(axis=1)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """Unique edges (n_edges, 2), smaller vertex first; computed once per mesh."""
+        edges = np.sort(self.elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        return np.unique(edges, axis=0)
 
     def gradient(self, values: np.ndarray) -> np.ndarray:
         """Return the constant gradient of a P1 function on every element, shape (ne, 2)."""

@@ -445,7 +445,12 @@ def default_zoom(
         # Coincident points are merged, so the two faces of a slit are joined here; the tip
         # search only needs the crack set near the slit, where that makes no difference.
         arrays = SimpleNamespace(
-            elements=elements, coords=coords, nv=len(coords), ne=len(elements), diameter=diameter
+            elements=elements,
+            coords=coords,
+            nv=len(coords),
+            ne=len(elements),
+            diameter=diameter,
+            edges=mesh_edges(elements),
         )
         vertex_v = np.zeros(len(coords))
         vertex_v[inverse.reshape(-1)] = v

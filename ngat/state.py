@@ -127,6 +127,7 @@ class ATState:
             self._b_solver: LaggedCholesky | None = None
             self._residual = self.a_matrix.CreateColVector()
             self._correction = self.a_matrix.CreateColVector()
+            self.bound_active = 0
 
     def _pulled_vertices(self, region: str, shift: float = 1e-9):
         """Return mapped points next to each vertex inside each element of ``region``.
@@ -140,8 +141,8 @@ class ATState:
         )
         points = self.mesh.MapToAllElements({TRIG: rule}, self.mesh.Materials(region))
         index = self.mesh.ngmesh.Elements2D().NumPy()["index"]
-        material = list(self.mesh.GetMaterials()).index(region) + 1
-        return points, self.arrays.elements[index == material].ravel()
+        numbers = [i + 1 for i, name in enumerate(self.mesh.GetMaterials()) if name == region]
+        return points, self.arrays.elements[np.isin(index, numbers)].ravel()
 
     @property
     def edges(self) -> EdgeTopology:
@@ -204,13 +205,23 @@ class ATState:
             self._a_solver.solve(self._residual, self._correction)
             self.u.vec.data += self._correction
 
-    def solve_v(self, crack: np.ndarray) -> None:
-        """v-step: minimise I_j(u, ·) over X_{j,CR} (Algorithm 1, step 2.2).
+    def solve_v(self, crack: np.ndarray, upper: np.ndarray | None = None) -> None:
+        """v-step: minimise I_j(u, ·) over X_{j,CR} with 0 ≤ v ≤ 1 (Algorithm 1, step 2.2).
+
+        Under Hypothesis A (non-positive off-diagonals of the stiffness matrix) the
+        unconstrained minimiser already lies in [0, 1] (Proposition 3) and one linear solve is
+        all. Bisection refinement creates obtuse angles that violate Hypothesis A, and then the
+        unconstrained solution can dip below 0 by up to ~1e−4 next to the crack. The v-step
+        therefore minimises over [0, upper] (the domain of I_ε in eq. 2), with a primal-dual
+        active set that only runs when the unconstrained solution leaves the bounds;
+        ``bound_active`` counts the DOFs held at a bound in the last v-step.
 
         Parameters
         ----------
         crack
             Boolean DOF mask of CR(t_k), where v is fixed to 0.
+        upper
+            Upper bound per DOF (default 1).
         """
         arrays = self.arrays
         with self.timer("assembly"):
@@ -218,17 +229,45 @@ class ATState:
             values = self.assembler.b_values((grad_u**2).sum(axis=1), self.model.eps)
             self.b_matrix.AsVector().FV().NumPy()[:] = values
             self.v_values[crack] = 0.0
-            rhs = self._residual.FV().NumPy()
-            rhs[:] = self.model.alpha * arrays.mass
         with self.timer("solve"):
             free = ~crack
             if self._b_solver is None or not np.array_equal(free, self._b_solver.free):
                 self._b_solver = LaggedCholesky(self.b_matrix, free, self.max_cg)
             else:
                 self._b_solver.values_changed()
+            self._v_correction(self._b_solver)
+            self.bound_active = self._enforce_bounds(free, 1.0 if upper is None else upper)
+
+    def _v_correction(self, solver: LaggedCholesky) -> None:
+        """Add the solution of B δ = αm − B v on the solver's free DOFs to v."""
+        self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
+        self._residual.data -= self.b_matrix * self.v.vec
+        solver.solve(self._residual, self._correction)
+        self.v.vec.data += self._correction
+
+    def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
+        """Primal-dual active set for 0 ≤ v ≤ upper on the free DOFs; return the active count."""
+        v = self.v_values
+        round_off = 1e-12
+        low = free & (v < -round_off)
+        high = free & (v > upper + round_off)
+        if not (low.any() or high.any()):
+            return 0
+        for _ in range(max_sweeps):
+            v[low] = 0.0
+            v[high] = upper[high] if np.ndim(upper) else upper
+            self._v_correction(LaggedCholesky(self.b_matrix, free & ~low & ~high, 0))
+            self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
             self._residual.data -= self.b_matrix * self.v.vec
-            self._b_solver.solve(self._residual, self._correction)
-            self.v.vec.data += self._correction
+            gradient = -self._residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
+            new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
+            new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
+            if np.array_equal(new_low, low) and np.array_equal(new_high, high):
+                break
+            low, high = new_low, new_high
+        else:
+            log.warning("bounded v-step: active set not settled after %d sweeps", max_sweeps)
+        return int(low.sum() + high.sum())
 
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:

@@ -7,7 +7,8 @@ sweep folder, named after its grid values (``eps=0.05_tol=0.3``); a failed run i
 its error and does not stop the others. ``sweep.csv`` collects one row per run (parameters,
 status, wall time, final energies, fracture time) and is rewritten atomically whenever a run
 ends. Re-running a sweep skips the runs whose ``summary.json`` says ``completed`` (same scene and
-parameters). :func:`plot_sweep` draws columns of ``sweep.csv`` against a grid parameter.
+parameters) and resumes interrupted ones from their checkpoint. :func:`plot_sweep` draws
+columns of ``sweep.csv`` against a grid parameter.
 
 With a remote scheduler, the workers need ngat installed and the sweep folder (and a scene file
 given by path) at the same path, e.g. on a shared file system.
@@ -159,7 +160,9 @@ def run_combination(
             check_results_folder(Path(folder), loaded.name, parameters.flat(), times, "resume")
             row.update(status="completed", skipped=True, **_result_row(existing))
             return row
-        run(loaded, parameters, times, Path(folder))
+        # An interrupted run of the same combination continues from its checkpoint.
+        resume = bool(existing) and existing.get("scene") == loaded.name
+        run(loaded, parameters, times, Path(folder), resume=resume)
         row.update(status="completed", **_result_row(read_summary(Path(folder))))
     except Exception as error:  # a failed run is a result of the sweep, not its end
         row.update(error=f"{type(error).__name__}: {error}".replace("\n", " "))

@@ -28,9 +28,9 @@ class HalfStepLog:
 
 @pytest.fixture(scope="session")
 def quick_run(tmp_path_factory):
-    """The quick two-slits run, with a CRTOL large enough that CR fills during the run."""
+    """The quick two-slits run (`ngat run two-slits --quick`)."""
     scene = load_scene("two-slits")
-    parameters, times = scene.configure(quick=True, overrides={"crtol": 0.02})
+    parameters, times = scene.configure(quick=True)
     log = HalfStepLog()
     folder = tmp_path_factory.mktemp("two-slits-quick")
     result = run(scene, parameters, times, folder, on_step=log.on_step, monitor=log.monitor)

@@ -75,6 +75,15 @@ CASES = {
         ["sweep grid: unknown parameter 'epsilon'", "use one of"],
     ),
     "sweep grid syntax": (["sweep", "profile-1d", "--grid", "eps"], ["NAME=V1,V2"]),
+    "resume another scene": (
+        ["run", "slit-laplace", "--quick", "--resume", "finished"],
+        ["cannot resume 'finished'", "scene 'profile-1d', not 'slit-laplace'"],
+    ),
+    "resume other parameters": (
+        ["run", "profile-1d", "--quick", "--set", "eps=0.1", "--resume", "finished"],
+        ["cannot resume 'finished'", "eps: 0.05 there, 0.1 here", "--overwrite"],
+    ),
+    "resume nothing": (["run", "profile-1d", "--resume", "nowhere"], ["holds no run"]),
     "folder of another run": (
         ["run", "slit-laplace", "--quick"],
         ["already holds a run of scene 'profile-1d'", "--overwrite"],
@@ -118,7 +127,8 @@ def assert_one_clean_line(result, words):
 def test_bad_input_gives_one_line_and_keeps_earlier_output(workspace, case):
     root, finished, before = workspace
     args, words = CASES[case]
-    result = ngat(*args, "--out", str(finished), cwd=root)
+    out = [] if "--resume" in args else ["--out", str(finished)]
+    result = ngat(*args, *out, cwd=root)
     assert_one_clean_line(result, words)
     assert snapshot(finished) == before
 

@@ -13,10 +13,9 @@ PICTURES = ["energies.png", "v_final.png", "mesh_final.png", "mesh_zoom.png"]
 
 
 @pytest.fixture(scope="module")
-def run_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("plot") / "two-slits-quick"
-    assert main(["run", "two-slits", "--quick", "--quiet", "--out", str(folder)]) == 0
-    return folder
+def run_folder(quick_run):
+    """The session's quick two-slits run (tests copy it before changing anything)."""
+    return quick_run[2]
 
 
 def assert_picture(path):

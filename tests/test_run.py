@@ -95,3 +95,24 @@ def test_cli_runs_a_scene_and_names_bad_input(tmp_path, capsys):
     assert "unknown scene 'no-such-scene'" in capsys.readouterr().err
     assert main(["run", "profile-1d", "--quiet", "--set", "eps=-1"]) == 2
     assert "eps must be positive" in capsys.readouterr().err
+
+
+def test_proposition_3_without_bounds_on_a_nonobtuse_mesh():
+    # Right triangles satisfy Hypothesis A: the unconstrained v-step stays in [0, 1] by itself,
+    # so the bounded v-step never has to hold a DOF at a bound.
+    from ngsolve import x
+
+    from geometries.profile_1d import aligned_mesh
+    from ngat.parameters import ModelParameters
+    from ngat.state import ATState
+
+    state = ATState(aligned_mesh(0.05), ModelParameters(eps=0.05), {"lower": lambda t: t * 5 * x})
+    state.apply_load(1.0)
+    crack = state.crack_set()
+    for _ in range(10):
+        state.solve_u()
+        state.solve_v(crack)
+        assert state.bound_active == 0
+    v = state.v_values
+    assert v.min() < 0.5, "the load should damage the strip"
+    assert v.min() >= 0 and v.max() <= 1
