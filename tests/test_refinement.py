@@ -77,3 +77,26 @@ def test_quick_run_refines_only_near_tips_and_cracks(quick_run):
     assert np.all(distance_to_crack < 0.3)
     # And the coarse mesh survives away from the crack (corners of the body).
     assert arrays.diameter.max() > 0.3
+
+
+def test_refinement_variants_after_and_fixed(tmp_path):
+    # "after" refines only once the alternating minimisation has converged, and leaves the
+    # estimators at or below TOL on the elements above the floor; "fixed" never refines.
+    from ngat.driver import run
+
+    scene = load_scene("two-slits")
+    records = {}
+    for adapt in ("after", "fixed", "paper"):
+        parameters, _ = scene.configure(
+            overrides={"adapt": adapt, "maxh": 0.5, "h_floor": 0.01, "tol": 0.5}
+        )
+        result = run(scene, parameters, np.array([0.0, 0.6, 1.0]), tmp_path / adapt)
+        records[adapt] = result.records[-1]
+        assert all(r["converged"] for r in result.records)
+    assert records["fixed"]["refinements"] == 0
+    assert records["fixed"]["elements"] == 348
+    for adapt in ("after", "paper"):
+        assert records[adapt]["elements"] > 348
+        assert records[adapt]["mu"] <= 0.5 and records[adapt]["nu"] <= 0.5
+    # Same load, same critical point up to the discretisation: energies agree to a few %.
+    assert abs(records["after"]["total"] / records["paper"]["total"] - 1) < 0.05
