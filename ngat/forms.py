@@ -16,6 +16,7 @@ from functools import cached_property
 import ngsolve
 import numpy as np
 from ngsolve import TRIG, BilinearForm, IntegrationRule, dx, grad
+from scipy.sparse import csr_matrix
 
 __all__ = ["vertex_rule", "lumped_dx", "a_form", "b_form", "MeshArrays", "LumpedAssembler"]
 
@@ -119,9 +120,23 @@ class MeshArrays:
         edges = np.sort(self.elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
         return np.unique(edges, axis=0)
 
+    @cached_property
+    def _gradient_matrix(self) -> csr_matrix:
+        """Sparse map from nodal values to element gradients, rows (x, y) per element."""
+        rows = np.repeat(np.arange(2 * self.ne).reshape(-1, 2), 3, axis=0).reshape(self.ne, 3, 2)
+        cols = np.broadcast_to(self.elements[:, :, None], (self.ne, 3, 2))
+        return csr_matrix(
+            (self.grad_phi.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * self.ne, self.nv)
+        )
+
+    @cached_property
+    def h2(self) -> np.ndarray:
+        """Squared element diameters h_T²."""
+        return self.diameter * self.diameter
+
     def gradient(self, values: np.ndarray) -> np.ndarray:
         """Return the constant gradient of a P1 function on every element, shape (ne, 2)."""
-        return np.einsum("ea,eak->ek", values[self.elements], self.grad_phi)
+        return (self._gradient_matrix @ values).reshape(self.ne, 2)
 
     def vertex_mean(self, values: np.ndarray) -> np.ndarray:
         """Return the mean of nodal values over each element's vertices: ∫_T P_j f / |T|."""
