@@ -21,24 +21,12 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ngat.forms import MeshArrays
+from ngat.forms import MeshArrays, mesh_edges
 
 __all__ = ["Slit", "mesh_edges", "components", "crack_tips", "connects"]
 
 Slit = tuple[tuple[float, float], tuple[float, float]]
 """A slit as a segment ``((x_mouth, y_mouth), (x_tip, y_tip))``."""
-
-
-def mesh_edges(elements: np.ndarray) -> np.ndarray:
-    """Return the unique edges of a triangle mesh, shape (n_edges, 2), smaller vertex first.
-
-    Parameters
-    ----------
-    elements
-        (ne, 3) vertex numbers of the triangles.
-    """
-    edges = np.sort(elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(edges, axis=0)
 
 
 def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:

@@ -18,7 +18,15 @@ import numpy as np
 from ngsolve import TRIG, BilinearForm, IntegrationRule, dx, grad
 from scipy.sparse import csr_matrix
 
-__all__ = ["vertex_rule", "lumped_dx", "a_form", "b_form", "MeshArrays", "LumpedAssembler"]
+__all__ = [
+    "vertex_rule",
+    "lumped_dx",
+    "a_form",
+    "b_form",
+    "mesh_edges",
+    "MeshArrays",
+    "LumpedAssembler",
+]
 
 
 def vertex_rule() -> IntegrationRule:
@@ -70,6 +78,18 @@ def b_form(fes: ngsolve.FESpace, u, eps: float) -> BilinearForm:
     return form
 
 
+def mesh_edges(elements: np.ndarray) -> np.ndarray:
+    """Return the unique edges of a triangle mesh, shape (n_edges, 2), smaller vertex first.
+
+    Parameters
+    ----------
+    elements
+        (ne, 3) vertex numbers of the triangles.
+    """
+    edges = np.sort(elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(edges, axis=0)
+
+
 class MeshArrays:
     """Element geometry of a P1 triangle mesh as numpy arrays, computed once per mesh.
 
@@ -117,8 +137,7 @@ class MeshArrays:
     @cached_property
     def edges(self) -> np.ndarray:
         """Unique edges (n_edges, 2), smaller vertex first; computed once per mesh."""
-        edges = np.sort(self.elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        return np.unique(edges, axis=0)
+        return mesh_edges(self.elements)
 
     @cached_property
     def _gradient_matrix(self) -> csr_matrix:
