@@ -47,6 +47,7 @@ scene = Scene(
     loads={"lower": lambda t: CoefficientFunction(0.0) * t},
     times=[0.0],
     crack=on_line,
-    parameters={"maxh": 0.05},
-    quick={"maxh": 0.1},
+    # Element diameters (√2·maxh) below ε = 0.05, so the crack band is resolved.
+    parameters={"maxh": 0.025},
+    quick={"maxh": 0.03},
 )

@@ -18,6 +18,7 @@ from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ngat.checkpoint import finished_steps
+from ngat.diagnostics import ProblemError
 from ngat.driver import run
 from ngat.minimization import ConvergenceError
 from ngat.output import OutputError, check_results_folder
@@ -231,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("ngat").setLevel(logging.INFO)
     try:
         return args.handler(args, console)
-    except (*INPUT_ERRORS, ConvergenceError) as error:
+    except (*INPUT_ERRORS, ConvergenceError, ProblemError) as error:
         if args.debug:
             raise
         console.print(f"ngat: error: {error}", markup=False, highlight=False, soft_wrap=True)

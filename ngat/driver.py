@@ -28,7 +28,8 @@ from ngat.checkpoint import (
     save_checkpoint,
 )
 from ngat.crack import connects, crack_tips
-from ngat.minimization import HalfStepMonitor, alternating_minimization, estimate
+from ngat.diagnostics import Diagnostics
+from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
 from ngat.scene import Scene
@@ -140,14 +141,18 @@ def run(
         summary.update({**checkpoint.summary, "status": "running", "versions": versions()})
         summary.setdefault("resumed_after_step", []).append(checkpoint.step)
     writer.write_summary(summary)
+    diagnostics = Diagnostics(parameters.solver.on_problem)
+    diagnostics.problems.extend(summary.get("diagnostics", []))
     try:
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
             if checkpoint is not None:
                 replay_refinements(mesh, checkpoint)
+        solver = parameters.solver
         state = ATState(
-            mesh, parameters.model, scene.loads, scene.crack, timer, parameters.solver.max_cg
-        )
+            mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
+            solver.bounded_v,
+        )  # fmt: skip
         if checkpoint is not None:
             restore_state(state, checkpoint)
             result.records.extend(checkpoint.records)
@@ -158,9 +163,13 @@ def run(
                 continue
             begin = time.perf_counter()
             state.apply_load(float(t))
-            step = alternating_minimization(
-                state, parameters.solver, parameters.adaptivity, monitor
-            )
+            try:
+                step = alternating_minimization(
+                    state, parameters.solver, parameters.adaptivity, monitor
+                )
+            except ConvergenceError as error:
+                diagnostics.report("nan", str(error), k, float(t), raise_now=False)
+                raise
             crack = state.crack_set()
             record = {"step": k, "t": float(t), **state.energies(), **state.reaction_forces()}
             record.update(
@@ -172,11 +181,17 @@ def run(
                 **state.mesh_measures(),
                 cracked_vertices=int(crack.sum()),
                 v_bound_active=state.bound_active,
+                linear_solves=step.linear_solves,
+                fallbacks=step.fallbacks,
             )
             record.update(crack_measures(state, scene))
             if "fracture_time" not in summary and record.get("connected") is False:
                 summary["fracture_time"] = float(t)
             summary["refinement_history"].extend({"step": k, **h} for h in step.history)
+            problems = diagnostics.check_step(
+                state, step, parameters.model.eps, k, float(t), raise_now=False
+            )
+            record["warnings"] = " ".join(problems)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
             with timer("output"):
@@ -194,6 +209,7 @@ def run(
             )
             if on_step:
                 on_step(record)
+            diagnostics.raise_if_error()
         summary["status"] = "completed"
     except BaseException as error:
         summary["status"] = f"failed: {type(error).__name__}: {error}"
@@ -206,6 +222,7 @@ def run(
             summary["final"] = {key: last[key] for key in ("t", "bulk", "surface", "total")}
             summary["final"].update(elements=last["elements"], h_min=last["h_min"])
         summary["timing"] = timer.summary()
+        summary["diagnostics"] = diagnostics.summary()
         writer.write_summary(summary)
         writer.close()
     return result

@@ -20,7 +20,13 @@ from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
 from ngat.state import ATState
 
-__all__ = ["StepResult", "alternating_minimization", "estimate", "ConvergenceError"]
+__all__ = [
+    "StepResult",
+    "alternating_minimization",
+    "Accelerator",
+    "estimate",
+    "ConvergenceError",
+]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +53,17 @@ class StepResult:
         Number of mesh refinements during the step.
     history
         One entry per refinement: iteration, half-step, elements, estimator before refining.
+    energies
+        I_j after every iteration.
+    energy_increases
+        Iterations on an unchanged mesh that increased I_j (should be 0: each half-step is a
+        minimisation).
+    fallbacks
+        Accelerated iterates rejected by the energy safeguard.
+    linear_solves
+        Linear systems solved during the step.
+    reason
+        Why the iteration stopped: ``converged`` or ``iteration limit``.
     """
 
     iterations: int = 0
@@ -54,6 +71,11 @@ class StepResult:
     change: float = np.inf
     refinements: int = 0
     history: list[dict] = field(default_factory=list)
+    energies: list[float] = field(default_factory=list)
+    energy_increases: int = 0
+    fallbacks: int = 0
+    linear_solves: int = 0
+    reason: str = ""
 
 
 def estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
@@ -155,17 +177,31 @@ def alternating_minimization(
         If a half-step produces NaN or Inf.
     """
     result = StepResult()
+    solves_before = state.linear_solves
     state.v_values[state.crack_set()] = 0.0
+    accelerator = Accelerator(solver) if solver.nonlinear != "am" else None
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec
-        for stage in ("u", "v"):
-            _half_step(state, stage, adaptivity, result)
-            if monitor:
-                monitor(stage, state)
+        elements = state.arrays.ne
+        _half_step(state, "u", adaptivity, result)
+        if accelerator and not accelerator.safeguard(state, elements, result):
+            _half_step(state, "u", adaptivity, result)
+        if monitor:
+            monitor("u", state)
+        _half_step(state, "v", adaptivity, result)
+        if monitor:
+            monitor("v", state)
+        energy = state.energies()["total"]
+        if accelerator:
+            accelerator.step(state)
+        if result.energies and elements == state.arrays.ne:
+            if energy > result.energies[-1] * (1 + 1e-10) + 1e-14:
+                result.energy_increases += 1
+        result.energies.append(energy)
         change = np.max(np.abs(state.v_values - state.v_iter.vec.FV().NumPy()))
         result.change = float(change)
-        if not np.isfinite(change):
+        if not np.isfinite(change) or not np.isfinite(energy):
             raise ConvergenceError(
                 f"the alternating minimisation produced NaN/Inf at iteration {result.iterations}"
             )
@@ -173,10 +209,79 @@ def alternating_minimization(
             if adaptivity.adapt == "after" and _refine_after(state, adaptivity, result):
                 continue
             result.converged = True
-            return result
-    log.warning(
-        "alternating minimisation stopped at the iteration limit %d with ‖Δv‖∞ = %.3g",
-        solver.am_max_iter,
-        result.change,
-    )
+            result.reason = "converged"
+            break
+    else:
+        result.reason = "iteration limit"
+        log.warning(
+            "alternating minimisation stopped at the iteration limit %d with ‖Δv‖∞ = %.3g",
+            solver.am_max_iter,
+            result.change,
+        )
+    result.linear_solves = state.linear_solves - solves_before
     return result
+
+
+class Accelerator:
+    """Over-relaxation or Anderson acceleration of the alternating-minimisation map v ↦ G(v).
+
+    G is one u-step followed by one v-step. After the v-step, :meth:`step` replaces the plain
+    iterate G(v) by v_old + ω(G(v) − v_old) (over-relaxation) or by the Anderson combination
+    of the last ``depth`` iterates, projected to 0 ≤ v ≤ 1 (≤ v(t_{k−1}) for pointwise
+    irreversibility) and v = 0 on CR. The v-step minimises I_j(u^n, ·) exactly, so the
+    accelerated v cannot be judged before the next u-step: :meth:`safeguard` compares
+    I_j(u^{n+1}, v_acc) with I_j(u^n, G(v)) and, if the energy went up, restores the plain
+    iterate (the caller repeats the u-step) and clears the history. The sequence of accepted
+    energies therefore never increases, as for plain alternating minimisation.
+    """
+
+    def __init__(self, solver: SolverParameters):
+        self.kind = solver.nonlinear
+        self.omega = solver.omega
+        self.depth = solver.anderson_depth
+        self.iterates: list[np.ndarray] = []  # G(x_k)
+        self.residuals: list[np.ndarray] = []  # G(x_k) − x_k
+        self.plain: np.ndarray | None = None
+        self.plain_energy = np.inf
+
+    def step(self, state: ATState) -> None:
+        """Replace the plain iterate in ``state.v`` by the accelerated one."""
+        v = state.v_values
+        v_old = state.v_iter.vec.FV().NumPy()
+        if len(v_old) != len(v) or (self.iterates and len(self.iterates[0]) != len(v)):
+            self.iterates, self.residuals, self.plain = [], [], None
+            return
+        self.plain = v.copy()
+        self.plain_energy = state.energies()["total"]
+        if self.kind == "overrelaxed":
+            candidate = v_old + self.omega * (v - v_old)
+        else:
+            self.iterates.append(v.copy())
+            self.residuals.append(v - v_old)
+            self.iterates = self.iterates[-(self.depth + 1) :]
+            self.residuals = self.residuals[-(self.depth + 1) :]
+            if len(self.residuals) < 2:
+                return
+            d_res = np.diff(np.array(self.residuals), axis=0)
+            d_it = np.diff(np.array(self.iterates), axis=0)
+            gamma = np.linalg.lstsq(d_res.T, self.residuals[-1], rcond=None)[0]
+            candidate = v - d_it.T @ gamma
+        upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
+        np.clip(candidate, 0.0, upper, out=candidate)
+        candidate[state.crack_set()] = 0.0
+        v[:] = candidate
+
+    def safeguard(self, state: ATState, elements: int, result: StepResult) -> bool:
+        """After the u-step: keep the accelerated v if I_j did not increase; else restore.
+
+        Returns ``False`` when the plain iterate was restored (the u-step must be repeated).
+        """
+        if self.plain is None or elements != state.arrays.ne or len(self.plain) != state.arrays.nv:
+            return True
+        if state.energies()["total"] <= self.plain_energy:
+            return True
+        state.v_values[:] = self.plain
+        state.v_iter.vec.FV().NumPy()[:] = self.plain
+        self.iterates, self.residuals, self.plain = [], [], None
+        result.fallbacks += 1
+        return False

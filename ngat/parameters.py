@@ -25,6 +25,18 @@ class ParameterError(ValueError):
     """A parameter has a wrong name, type or value."""
 
 
+def _convert(kind: type, value: Any) -> Any:
+    """Convert ``value`` (often a string from the command line) to ``kind``."""
+    if isinstance(value, kind):
+        return value
+    if kind is bool:
+        words = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+        if str(value).lower() not in words:
+            raise ValueError(value)
+        return words[str(value).lower()]
+    return kind(value)
+
+
 @dataclass(frozen=True)
 class ModelParameters:
     """Ambrosio–Tortorelli model (paper, eq. 6–7 and Section 1.2).
@@ -37,11 +49,15 @@ class ModelParameters:
         Residual stiffness η, 0 ≤ η ≪ ε.
     crtol
         Crack-set tolerance: CR(t_k) = {v(t_{k-1}) < crtol}.
+    irreversibility
+        ``"crtol"``: v = 0 on CR(t_k) (the paper's choice); ``"pointwise"``: v ≤ v(t_{k−1})
+        (eq. 3), a bound-constrained v-step.
     """
 
     eps: float = 0.05
     eta: float = 1e-5
     crtol: float = 1e-4
+    irreversibility: str = "crtol"
 
     @property
     def alpha(self) -> float:
@@ -63,6 +79,10 @@ class ModelParameters:
             raise ParameterError(
                 f"crtol must lie in (0, 1), got crtol={self.crtol}: choose 0 < crtol < 1"
             )
+        if self.irreversibility not in ("crtol", "pointwise"):
+            raise ParameterError(
+                f"irreversibility must be crtol or pointwise, got {self.irreversibility!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -78,11 +98,30 @@ class SolverParameters:
     max_cg
         CG iterations accepted with a stale Cholesky factor as preconditioner before the
         factor is refreshed (:class:`ngat.linear.LaggedCholesky`); 0: refactorise every solve.
+    nonlinear
+        Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
+        minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old), or
+        ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
+        accelerated steps fall back to the plain one whenever it has lower energy.
+    omega
+        Over-relaxation factor ω.
+    anderson_depth
+        Number of previous iterates Anderson acceleration combines.
+    bounded_v
+        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.state.ATState.solve_v`).
+    on_problem
+        ``"warn"``: problems found by :mod:`ngat.diagnostics` are logged and recorded;
+        ``"error"``: the run stops at the first one.
     """
 
     am_tol: float = 1e-3
     am_max_iter: int = 1000
     max_cg: int = 0
+    nonlinear: str = "am"
+    omega: float = 1.5
+    anderson_depth: int = 5
+    bounded_v: bool = True
+    on_problem: str = "warn"
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
@@ -90,6 +129,16 @@ class SolverParameters:
             raise ParameterError(f"am_tol must be positive, got am_tol={self.am_tol}")
         if not self.am_max_iter >= 1:
             raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
+        if self.nonlinear not in ("am", "overrelaxed", "anderson"):
+            raise ParameterError(
+                f"nonlinear must be am, overrelaxed or anderson, got {self.nonlinear!r}"
+            )
+        if not 0 < self.omega < 2:
+            raise ParameterError(f"omega must lie in (0, 2), got omega={self.omega}")
+        if not self.anderson_depth >= 1:
+            raise ParameterError(f"anderson_depth must be >= 1, got {self.anderson_depth}")
+        if self.on_problem not in ("warn", "error"):
+            raise ParameterError(f"on_problem must be warn or error, got {self.on_problem!r}")
 
 
 @dataclass(frozen=True)
@@ -182,7 +231,7 @@ class Parameters:
                 raise ParameterError(f"unknown parameter '{name}': {hint}known are {known}")
             kind = names[name]
             try:
-                converted = kind(value) if not isinstance(value, kind) else value
+                converted = _convert(kind, value)
                 if kind is int and isinstance(value, float) and value != int(value):
                     raise ValueError
             except (TypeError, ValueError):

@@ -53,6 +53,9 @@ class ATState:
     max_cg
         CG iterations accepted with a stale Cholesky factor before it is refreshed
         (:class:`ngat.linear.LaggedCholesky`); 0 refactorises at every solve.
+    bounded_v
+        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`solve_v`); ``False`` solves the
+        unconstrained linear system only (the paper's v-step, exact under Hypothesis A).
     """
 
     def __init__(
@@ -63,6 +66,7 @@ class ATState:
         crack: str | Callable[[np.ndarray], np.ndarray] | None = None,
         timer: PhaseTimer | None = None,
         max_cg: int = 0,
+        bounded_v: bool = True,
     ):
         if not loads:
             raise SceneError("the scene has no Dirichlet region: give at least one load")
@@ -77,6 +81,8 @@ class ATState:
         self.model = model
         self.timer = timer or PhaseTimer()
         self.max_cg = max_cg
+        self.bounded_v = bounded_v
+        self.linear_solves = 0
         self.t = Parameter(0.0)
         self.loads = {name: g(self.t) for name, g in loads.items()}
         self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
@@ -163,7 +169,14 @@ class ATState:
         return self.v.vec.FV().NumPy()
 
     def crack_set(self) -> np.ndarray:
-        """Return CR(t_k) = {v(t_{k-1}) < CRTOL} (paper, Section 1.2) plus the scene's crack."""
+        """Return the DOFs where v = 0 is imposed: CR(t_k) and the scene's crack.
+
+        With ``irreversibility="crtol"`` CR(t_k) = {v(t_{k-1}) < CRTOL} (paper, Section 1.2);
+        with ``"pointwise"`` irreversibility is the bound v ≤ v(t_{k−1}) of eq. (3) instead
+        (:meth:`solve_v`) and only the scene's crack is fixed.
+        """
+        if self.model.irreversibility == "pointwise":
+            return self.initial_crack.copy()
         return (self.v_prev.vec.FV().NumPy() < self.model.crtol) | self.initial_crack
 
     # -- load -------------------------------------------------------------------------------
@@ -203,25 +216,25 @@ class ATState:
                 self._a_solver.values_changed()
             self._residual.data = -1 * (self.a_matrix * self.u.vec)
             self._a_solver.solve(self._residual, self._correction)
+            self.linear_solves += 1
             self.u.vec.data += self._correction
 
-    def solve_v(self, crack: np.ndarray, upper: np.ndarray | None = None) -> None:
+    def solve_v(self, crack: np.ndarray) -> None:
         """v-step: minimise I_j(u, ·) over X_{j,CR} with 0 ≤ v ≤ 1 (Algorithm 1, step 2.2).
 
         Under Hypothesis A (non-positive off-diagonals of the stiffness matrix) the
         unconstrained minimiser already lies in [0, 1] (Proposition 3) and one linear solve is
         all. Bisection refinement creates obtuse angles that violate Hypothesis A, and then the
         unconstrained solution can dip below 0 by up to ~1e−4 next to the crack. The v-step
-        therefore minimises over [0, upper] (the domain of I_ε in eq. 2), with a primal-dual
+        therefore minimises over [0, 1] (the domain of I_ε in eq. 2), with a primal-dual
         active set that only runs when the unconstrained solution leaves the bounds;
-        ``bound_active`` counts the DOFs held at a bound in the last v-step.
+        ``bound_active`` counts the DOFs held at a bound in the last v-step. With pointwise
+        irreversibility the upper bound is v(t_{k−1}) (eq. 3) and the active set always runs.
 
         Parameters
         ----------
         crack
             Boolean DOF mask of CR(t_k), where v is fixed to 0.
-        upper
-            Upper bound per DOF (default 1).
         """
         arrays = self.arrays
         with self.timer("assembly"):
@@ -236,13 +249,18 @@ class ATState:
             else:
                 self._b_solver.values_changed()
             self._v_correction(self._b_solver)
-            self.bound_active = self._enforce_bounds(free, 1.0 if upper is None else upper)
+            if self.model.irreversibility == "pointwise":
+                upper = self.v_prev.vec.FV().NumPy().copy()
+                self.bound_active = self._enforce_bounds(free, upper)
+            elif self.bounded_v:
+                self.bound_active = self._enforce_bounds(free, 1.0)
 
     def _v_correction(self, solver: LaggedCholesky) -> None:
         """Add the solution of B δ = αm − B v on the solver's free DOFs to v."""
         self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
         self._residual.data -= self.b_matrix * self.v.vec
         solver.solve(self._residual, self._correction)
+        self.linear_solves += 1
         self.v.vec.data += self._correction
 
     def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:

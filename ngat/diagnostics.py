@@ -1,0 +1,118 @@
+"""Detection of numerical trouble in a run, named in the log and the run summary.
+
+Each load step is checked for: the alternating minimisation stopping at its iteration limit
+(``not-converged``), NaN or Inf (``nan``, always an error), v outside [0, 1] beyond round-off
+(``v-out-of-bounds``: Proposition 3 needs Hypothesis A, which obtuse elements violate, unless the
+v-step is bounded), an iteration that increased I_j although every half-step minimises it
+(``energy-increase``), and ε under-resolved by the mesh where the crack is
+(``eps-under-resolved``: the largest element meeting the crack {v < 0.1} is at least ε wide,
+so the profile 1 − exp(−d/(2ε)) is not resolved and the crack costs ≈ 1 + h/(4ε) times G_c).
+Depending on ``on_problem`` each is a warning (logged, listed in ``summary.json`` under
+``diagnostics`` and in the step's ``warnings`` column) or an error that stops the run, with the
+results written so far kept.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from ngat.minimization import StepResult
+from ngat.state import ATState
+
+__all__ = ["Diagnostics", "ProblemError", "ROUND_OFF"]
+
+log = logging.getLogger(__name__)
+
+ROUND_OFF = 1e-10
+
+
+class ProblemError(RuntimeError):
+    """A detected problem, raised when ``on_problem="error"``."""
+
+
+class Diagnostics:
+    """Collect the problems of a run.
+
+    Parameters
+    ----------
+    on_problem
+        ``"warn"`` or ``"error"``.
+    """
+
+    def __init__(self, on_problem: str = "warn"):
+        self.on_problem = on_problem
+        self.problems: list[dict[str, Any]] = []
+        self._pending: str | None = None
+
+    def report(
+        self, kind: str, message: str, step: int, t: float, error: bool = False,
+        raise_now: bool = True,
+    ) -> None:  # fmt: skip
+        """Record a problem; raise :class:`ProblemError` if it is an error.
+
+        With ``raise_now=False`` the error is kept until :meth:`raise_if_error`, so that the
+        caller can first write the step that showed it.
+        """
+        self.problems.append({"step": step, "t": t, "kind": kind, "message": message})
+        log.warning("step %d, t=%.4g: %s: %s", step, t, kind, message)
+        if error or self.on_problem == "error":
+            self._pending = f"{kind} at t={t:.4g}: {message}"
+            if raise_now:
+                self.raise_if_error()
+
+    def raise_if_error(self) -> None:
+        """Raise :class:`ProblemError` for an error reported with ``raise_now=False``."""
+        if self._pending is not None:
+            message, self._pending = self._pending, None
+            raise ProblemError(message)
+
+    def check_step(
+        self,
+        state: ATState,
+        result: StepResult,
+        eps: float,
+        step: int,
+        t: float,
+        raise_now: bool = True,
+    ) -> list[str]:
+        """Check one finished load step; return the names of the problems found."""
+        found = []
+        v = state.v_values
+        checks = [
+            (
+                "not-converged",
+                not result.converged,
+                f"stopped at the iteration limit with ‖Δv‖∞ = {result.change:.3g}",
+            ),
+            (
+                "v-out-of-bounds",
+                v.min() < -ROUND_OFF or v.max() > 1 + ROUND_OFF,
+                f"v in [{v.min():.3g}, {v.max():.3g}]: Hypothesis A fails on this mesh "
+                "(set bounded_v=true)",
+            ),
+            (
+                "energy-increase",
+                result.energy_increases > 0,
+                f"I_j increased in {result.energy_increases} iteration(s) on an unchanged mesh",
+            ),
+        ]
+        crack_zone = (v[state.arrays.elements] < 0.1).any(axis=1)
+        h_crack = float(state.arrays.diameter[crack_zone].max()) if crack_zone.any() else 0.0
+        checks.append(
+            (
+                "eps-under-resolved",
+                h_crack >= eps,
+                f"elements up to h = {h_crack:.3g} ≥ ε = {eps:.3g} where v < 0.1: refine "
+                "(smaller tol or h_floor) or increase eps",
+            )
+        )
+        for kind, fired, message in checks:
+            if fired:
+                found.append(kind)
+                self.report(kind, message, step, t, raise_now=raise_now)
+        return found
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Return the problems as a list for ``summary.json`` (one entry per step and kind)."""
+        return list(self.problems)

@@ -1,0 +1,130 @@
+"""Detection (issue 6): each problem fires on a case built for it, quiet on the quick run."""
+
+import json
+
+import numpy as np
+import pytest
+from ngsolve import Mesh
+from ngsolve.meshes import MakeStructured2DMesh
+
+from ngat.diagnostics import ProblemError
+from ngat.driver import run
+from ngat.minimization import ConvergenceError
+from ngat.scene import Scene, load_scene
+from ngat.state import ATState
+
+
+def sheared_mesh(maxh, shear=4.0):
+    """Structured mesh of the unit square sheared by x → x + shear·y: obtuse triangles.
+
+    The elements with x − shear·y < 0.1 form the material ``grip`` (Ω_D), the rest ``body``.
+    """
+    n = round(1 / maxh)
+    mesh = MakeStructured2DMesh(quads=False, nx=n, ny=n, mapping=lambda a, b: (a + shear * b, b))
+    ngmesh = mesh.ngmesh
+    elements = ngmesh.Elements2D().NumPy()
+    xy = ngmesh.Coordinates()[elements["nodes"][:, :3] - 1].mean(axis=1)
+    elements["index"] = np.where(xy[:, 0] - shear * xy[:, 1] < 0.1, 1, 2)
+    ngmesh.SetMaterial(1, "grip")
+    ngmesh.SetMaterial(2, "body")
+    return Mesh(ngmesh)
+
+
+OBTUSE = Scene(
+    name="obtuse-line",
+    geometry=None,
+    mesh=sheared_mesh,
+    loads={"grip": lambda t: 0 * t},
+    times=[0.0],
+    crack=lambda xy: np.abs(xy[:, 1] - 0.5) < 1e-9,
+    parameters={"maxh": 0.05, "adapt": "fixed"},
+)
+
+
+def problems(folder):
+    return {p["kind"] for p in json.loads((folder / "summary.json").read_text())["diagnostics"]}
+
+
+def test_quiet_on_the_quick_run(quick_run):
+    result, _, folder = quick_run
+    assert problems(folder) == set()
+    assert all(r["warnings"] == "" for r in result.records)
+
+
+def test_v_out_of_bounds_without_hypothesis_a(tmp_path):
+    # Obtuse triangles: the unconstrained v-step overshoots 1 next to the line v = 0.
+    parameters, times = OBTUSE.configure(overrides={"bounded_v": False})
+    result = run(OBTUSE, parameters, times, tmp_path / "free")
+    assert result.records[-1]["v_max"] > 1.01
+    assert "v-out-of-bounds" in problems(tmp_path / "free")
+    # The bounded v-step keeps v in [0, 1] on the same mesh and reports nothing.
+    parameters, times = OBTUSE.configure()
+    result = run(OBTUSE, parameters, times, tmp_path / "bounded")
+    assert result.records[-1]["v_max"] <= 1 + 1e-12
+    assert result.records[-1]["v_bound_active"] > 0
+    assert "v-out-of-bounds" not in problems(tmp_path / "bounded")
+
+
+def coarse_two_slits(**overrides):
+    scene = load_scene("two-slits")
+    changes = {"adapt": "fixed", "maxh": 0.5, **overrides}
+    parameters, _ = scene.configure(overrides=changes)
+    return scene, parameters, np.array([0.0, 1.5])
+
+
+def test_not_converged(tmp_path):
+    scene, parameters, times = coarse_two_slits(am_max_iter=2, eps=0.5)
+    result = run(scene, parameters, times, tmp_path / "run")
+    assert not result.records[-1]["converged"]
+    assert problems(tmp_path / "run") == {"not-converged"}
+    assert "not-converged" in result.records[-1]["warnings"]
+
+
+def test_eps_under_resolved(tmp_path):
+    # ε = 0.2 on the initial mesh (elements up to 0.5): the crack band is not resolved.
+    scene, parameters, _ = coarse_two_slits(eps=0.2)
+    result = run(scene, parameters, np.array([0.0, 1.5, 2.5]), tmp_path / "run")
+    assert result.records[-1]["v_min"] < 0.1
+    assert problems(tmp_path / "run") == {"eps-under-resolved"}
+
+
+def test_energy_increase_is_detected(tmp_path, monkeypatch):
+    # A broken v-step (it adds noise after solving) makes an iteration increase I_j.
+    solve_v = ATState.solve_v
+
+    def noisy(self, crack):
+        solve_v(self, crack)
+        rng = np.random.default_rng(len(self.v_values))
+        self.v_values[~crack] = np.clip(
+            self.v_values[~crack] - 0.2 * rng.random((~crack).sum()), 0, 1
+        )
+
+    monkeypatch.setattr(ATState, "solve_v", noisy)
+    scene, parameters, times = coarse_two_slits(am_max_iter=5, eps=0.5)
+    run(scene, parameters, times, tmp_path / "run")
+    assert "energy-increase" in problems(tmp_path / "run")
+
+
+def test_nan_stops_the_run_and_is_named(tmp_path, monkeypatch):
+    solve_u = ATState.solve_u
+
+    def poisoned(self):
+        solve_u(self)
+        if self.t.Get() > 1:
+            self.u_values[0] = np.nan
+
+    monkeypatch.setattr(ATState, "solve_u", poisoned)
+    scene, parameters, times = coarse_two_slits(eps=0.5)
+    with pytest.raises(ConvergenceError):
+        run(scene, parameters, times, tmp_path / "run")
+    assert problems(tmp_path / "run") == {"nan"}
+    rows = (tmp_path / "run" / "energies.csv").read_text().strip().splitlines()
+    assert len(rows) == 2, "the step before the NaN is kept"
+
+
+def test_on_problem_error_stops_after_writing_the_step(tmp_path):
+    scene, parameters, times = coarse_two_slits(am_max_iter=2, on_problem="error")
+    with pytest.raises(ProblemError, match="not-converged"):
+        run(scene, parameters, times, tmp_path / "run")
+    rows = (tmp_path / "run" / "energies.csv").read_text().strip().splitlines()
+    assert len(rows) == 3
