@@ -1,0 +1,142 @@
+"""Stability where methods fail: the failure matrix of nonlinear solvers × stress cases.
+
+Question: which nonlinear solver for one load step (plain alternating minimisation ``am``, the
+paper's; ``overrelaxed``; ``anderson``) survives which stress — the rapid-growth window of
+two-slits, large load increments, η → 0, an under-resolved ε, obtuse meshes with and without the
+bounded v-step, coarse and fine TOL — and at what cost?
+
+Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
+changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
+records: status (converged, not converged, failed with the error, timeout), AM iterations,
+linear solves, final total energy, min/max v, fracture time, the diagnostics and the wall time.
+
+Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
+(a colour table). ``--quick`` runs two cells only (used by the tests).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import multiprocessing
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+QUICK_TIMES = np.round(np.arange(0.0, 1.61, 0.05), 10)
+GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 10)
+CASES = {
+    # name: (parameter changes, load times)
+    "growth window Δt=0.01": ({}, GROWTH_TIMES),
+    "Δt=0.05": ({}, QUICK_TIMES),
+    "Δt=0.1": ({}, np.round(np.arange(0.0, 1.61, 0.1), 10)),
+    "η=1e-3": ({"eta": 1e-3}, QUICK_TIMES),
+    "η=1e-8": ({"eta": 1e-8}, QUICK_TIMES),
+    "ε under-resolved (fixed h=0.25)": ({"adapt": "fixed", "maxh": 0.25}, QUICK_TIMES),
+    "TOL=1.0": ({"tol": 1.0}, QUICK_TIMES),
+    "TOL=0.05": ({"tol": 0.05, "h_floor": 0.004}, QUICK_TIMES),
+    "no v bounds (obtuse bisection)": ({"bounded_v": False}, QUICK_TIMES),
+}  # fmt: skip
+METHODS = ["am", "overrelaxed", "anderson"]
+
+
+def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
+    """Run one cell and put its row on the queue (runs in a child process)."""
+    from ngat.driver import run
+    from ngat.scene import load_scene
+
+    changes, times = CASES[case]
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(quick=True, overrides={"nonlinear": method, **changes})
+    begin = time.perf_counter()
+    try:
+        result = run(scene, parameters, times, Path(tempfile.mkdtemp()) / "run")
+        records = result.records
+        status = "converged" if all(r["converged"] for r in records) else "not converged"
+        row = {
+            "status": status,
+            "am_iterations": sum(r["am_iterations"] for r in records),
+            "linear_solves": sum(r["linear_solves"] for r in records),
+            "total": records[-1]["total"],
+            "v_min": min(r["v_min"] for r in records),
+            "v_max": max(r["v_max"] for r in records),
+            "fracture_time": result.summary.get("fracture_time", ""),
+            "diagnostics": " ".join(sorted({p["kind"] for p in result.summary["diagnostics"]})),
+        }
+    except Exception as error:  # noqa: BLE001 - a failed cell is a result of the study
+        row = {"status": f"failed: {type(error).__name__}: {error}"}
+    row["wall_s"] = round(time.perf_counter() - begin, 2)
+    queue.put(row)
+
+
+def run_cell(method: str, case: str, limit: float) -> dict:
+    """Run a cell in a child process; a cell over the time limit is recorded as a timeout."""
+    queue: multiprocessing.Queue = multiprocessing.Queue()
+    process = multiprocessing.Process(target=cell, args=(method, case, queue))
+    process.start()
+    process.join(limit)
+    if process.is_alive():
+        process.kill()
+        return {"method": method, "case": case, "status": "timeout", "wall_s": limit}
+    return {"method": method, "case": case, **queue.get()}
+
+
+def draw(rows: list[dict], path: Path) -> None:
+    """Draw the colour table: green converged, yellow not converged, red failed or timeout."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    colour = {"converged": "#7fc97f", "not converged": "#fdc086"}
+    fig, ax = plt.subplots(figsize=(2.4 * len(methods) + 2.5, 0.55 * len(cases) + 1))
+    for i, case in enumerate(cases):
+        for j, method in enumerate(methods):
+            row = next((r for r in rows if r["case"] == case and r["method"] == method), None)
+            if row is None:
+                continue
+            status = row["status"]
+            face = colour.get(status, "#f0027f")
+            text = status if not status.startswith("failed") else "failed"
+            if "linear_solves" in row:
+                text += f"\n{row['linear_solves']} solves, {row['wall_s']:.0f} s"
+            ax.add_patch(plt.Rectangle((j, i), 1, 1, facecolor=face, edgecolor="white"))
+            ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7)
+    ax.set_xlim(0, len(methods))
+    ax.set_ylim(len(cases), 0)
+    ax.set_xticks(np.arange(len(methods)) + 0.5, methods)
+    ax.set_yticks(np.arange(len(cases)) + 0.5, cases, fontsize=8)
+    ax.set_title("two-slits --quick: failure matrix")
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("results/stability"))
+    parser.add_argument("--limit", type=float, default=300.0, help="seconds per cell")
+    parser.add_argument("--quick", action="store_true", help="two cells only")
+    args = parser.parse_args()
+    cells = [(m, c) for c in CASES for m in METHODS]
+    if args.quick:
+        cells = [("am", "Δt=0.1"), ("anderson", "Δt=0.1")]
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for method, case in cells:
+        rows.append(run_cell(method, case, args.limit))
+        print(json.dumps(rows[-1]), flush=True)
+        columns = list(dict.fromkeys(k for r in rows for k in r))
+        with open(args.out / "stability.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns)
+            writer.writeheader()
+            writer.writerows(rows)
+    draw(rows, args.out / "stability.png")
+
+
+if __name__ == "__main__":
+    main()
