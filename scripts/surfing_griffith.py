@@ -1,0 +1,199 @@
+"""Griffith's theory on the surfing scene: critical amplitude and steady propagation.
+
+Question: does the discrete AT model of ngat crack like Griffith's theory says, with the
+effective toughness G_eff(h) = 1 + h/(4ε) + (h/ε)²/32 of a crack band one element wide
+(DESIGN.md, scene 2)? The scene is ``geometries/surfing.py``: a strip with a pre-crack whose
+frame Ω_D carries the mode-III tip field U = A sqrt(2r/π) sin(θ/2), energy release rate G = A².
+
+(a) Critical amplitude: the tip field stays at the pre-crack's tip (V = 0) and A is ramped;
+    the crack starts to grow at A_c² (:func:`geometries.surfing.onset`), which should equal
+    G_eff(h) within 3 %.
+(b) Steady propagation: A² = 1.2 G_eff(h) and the tip field moves at V; after a transient the
+    crack tip moves at V and the surface energy grows at G_eff per unit crack advance
+    (:func:`geometries.surfing.steady_rates`), within 2 %.
+
+h is the side of the squares of the structured band along the crack path (the spacing of the
+node lines parallel to the crack); the mesh is fixed (``adapt=fixed``). Both measures carry a
+bias of order ε/R (AT2 damages the whole body a little; R = 0.6 is the distance from the tip
+to the frame), so the study varies R/ε through ε with the geometry fixed, and h/ε.
+
+Run ``python scripts/surfing_griffith.py`` (the study, ``--out`` default
+``results/surfing_griffith``: ``griffith.csv``) or ``--quick`` (the coarse variant the tests
+use: h = ε, R/ε = 200 for (a) and 400 for (b)).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from geometries import surfing
+from ngat.driver import run
+
+R = surfing.HEIGHT / 2 - surfing.FRAME
+"""Distance from the pre-crack's tip to the frame."""
+
+
+def critical_amplitude(
+    eps: float, h: float, folder: Path, span=(0.88, 1.12), steps: int = 25, **overrides
+) -> dict:
+    """Ramp A with the tip field fixed at the pre-crack's tip; return A_c² against G_eff(h).
+
+    Parameters
+    ----------
+    eps, h
+        ε and the band's cell side.
+    folder
+        Results folder of the run.
+    span
+        Range of A² / G_eff(h) covered, in ``steps`` load steps equally spaced in A².
+    overrides
+        Further parameters of the run (``am_tol``, ...).
+
+    Returns
+    -------
+    dict
+        ``a_c_sq``, ``g_eff``, ``ratio`` = A_c² / G_eff, ``wall_s`` and the run's records.
+    """
+    g_eff = surfing.effective_toughness(h, eps)
+    amplitude = np.sqrt(g_eff * np.linspace(span[0], span[1], steps))
+    top = float(amplitude[-1])
+    # A(t) = t: amplitude A_max reached at t = ramp = A_max.
+    scene = surfing.make_scene(
+        amplitude=top, speed=0.0, ramp=top, eps=eps, h_band=h, times=np.round(amplitude, 12),
+        band_end=surfing.CRACK_LENGTH + 0.15 * R, half_width=6 * eps, name="surfing-critical",
+    )  # fmt: skip
+    parameters, times = scene.configure(overrides=overrides)
+    begin = time.perf_counter()
+    result = run(scene, parameters, times, folder)
+    records = result.records
+    a_c_sq = surfing.onset([r["t"] ** 2 for r in records], [r["tip1_x"] for r in records])
+    return {
+        "a_c_sq": a_c_sq,
+        "g_eff": g_eff,
+        "ratio": a_c_sq / g_eff,
+        "wall_s": time.perf_counter() - begin,
+        "records": records,
+    }
+
+
+def steady_propagation(
+    eps: float,
+    h: float,
+    folder: Path,
+    speed: float = 0.4,
+    advance_per_step: float = 2.0,
+    steps: int = 17,
+    skip: int = 9,
+    lag: float = 0.0,
+    ramp: float = 0.05,
+    **overrides,
+) -> dict:
+    """Drive the crack with A² = 1.2 G_eff(h) at speed V; return its speed and toughness.
+
+    Parameters
+    ----------
+    eps, h
+        ε and the band's cell side.
+    folder
+        Results folder of the run.
+    speed
+        V.
+    advance_per_step
+        V Δt in units of h.
+    steps
+        Number of load steps.
+    skip
+        Steps left out of the fit (the ramp and the transient).
+    lag
+        The imposed tip starts this far behind a₀. Starting it closer to the steady lead
+        (about 0.1) shortens the first jump of the crack but moves the imposed tip towards
+        the frame, where the steady lead changes with position (finite strip).
+    ramp
+        Time over which the amplitude is ramped in; a slow ramp lets the crack settle at the
+        steady lead instead of overshooting it.
+    overrides
+        Further parameters of the run.
+
+    Returns
+    -------
+    dict
+        ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff, ``g_eff``,
+        ``lead`` (crack tip − imposed tip at the end), ``wall_s`` and the run's records.
+    """
+    g_eff = surfing.effective_toughness(h, eps)
+    dt = advance_per_step * h / speed
+    times = np.round(dt * np.arange(1, steps + 1), 12)
+    start = surfing.CRACK_LENGTH - lag
+    scene = surfing.make_scene(
+        amplitude=np.sqrt(surfing.OVERLOAD * g_eff), speed=speed, ramp=ramp,
+        eps=eps, h_band=h, times=times, tip_start=start,
+        band_end=start + speed * times[-1] + 0.25 * R, half_width=6 * eps,
+        name="surfing-steady",
+    )  # fmt: skip
+    parameters, times = scene.configure(overrides=overrides)
+    begin = time.perf_counter()
+    records = run(scene, parameters, times, folder).records
+    window = records[skip:]
+    rates = surfing.steady_rates(
+        [r["t"] for r in window], [r["tip1_x"] for r in window], [r["surface"] for r in window]
+    )
+    last = records[-1]
+    return {
+        "speed_ratio": rates["speed"] / speed,
+        "toughness_ratio": rates["toughness"] / g_eff,
+        "g_eff": g_eff,
+        "lead": last["tip1_x"] - (start + speed * last["t"]),
+        "wall_s": time.perf_counter() - begin,
+        "records": records,
+    }
+
+
+QUICK = {"critical": (R / 400, 1.0), "steady": (R / 400, 1.0)}
+"""(ε, h/ε) of the coarse variant: R/ε = 200 for (a), 400 for (b)."""
+
+STUDY = [(60, 1.0), (200, 1.0), (400, 1.0), (200, 0.5), (400, 0.5)]
+"""(R/ε, h/ε) of the study."""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="the coarse test variant only")
+    parser.add_argument("--out", type=Path, default=Path("results/surfing_griffith"))
+    parser.add_argument("--steps", type=int, default=17, help="load steps of (b)")
+    parser.add_argument("--skip", type=int, default=9, help="steps of (b) left out of the fit")
+    parser.add_argument("--cases", nargs="+", default=None, help="R/eps:h/eps pairs, e.g. 400:1")
+    args = parser.parse_args()
+    cases = [(R / QUICK["steady"][0], 1.0)] if args.quick else STUDY
+    if args.cases:
+        cases = [tuple(float(v) for v in case.split(":")) for case in args.cases]
+    rows = []
+    for ratio, h_over_eps in cases:
+        eps = R / ratio
+        tag = f"R{ratio:g}_h{h_over_eps:g}"
+        a = critical_amplitude(eps, h_over_eps * eps, args.out / f"critical_{tag}")
+        b = steady_propagation(
+            eps, h_over_eps * eps, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip
+        )
+        rows.append(
+            {"R_over_eps": ratio, "h_over_eps": h_over_eps, "g_eff": round(a["g_eff"], 5),
+             "a_c_sq_over_g_eff": round(a["ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
+             "speed_over_V": round(b["speed_ratio"], 4),
+             "toughness_over_g_eff": round(b["toughness_ratio"], 4),
+             "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
+             "steps": args.steps, "skip": args.skip}
+        )  # fmt: skip
+        print(rows[-1], flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with open(args.out / "griffith.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,293 @@
+"""Work against precision: error against wall time, adaptive (Algorithm 2) against uniform meshes.
+
+Question: for the same accuracy, how much cheaper is the adaptive method than a uniform mesh —
+and does the adaptive run reach the accuracy of the uniform h = 0.025 run in the total energy at
+t = 1.0 with at least 10 times less wall time (issue 5)?
+
+Scenes: ``two-slits`` (the paper's example, DESIGN.md scene 1) and ``surfing`` (scene 2, its
+default: ε = 0.01, A = 1.1, V = 0.2, from the uniform mesh of squares of side 0.1). Methods,
+each with the scene's full load history (no fewer steps for either):
+
+- adaptive: Algorithm 2 (``adapt=paper``) at TOL ∈ {0.6, 0.3, 0.15, 0.075}, all else default
+  (h_floor = 1e-3, am_tol = 1e-3);
+- uniform: ``adapt=fixed`` on the scene's initial mesh with ``maxh = h``, h ∈ {0.1, 0.05, 0.025}
+  (``--hs`` adds 0.0125: a few hours for two-slits, 620 000 elements, so it is left out by
+  default).
+
+Each case runs in its own process (``ProcessPoolExecutor(max_workers=1,
+max_tasks_per_child=1)``), one after the other; it reports the wall time of ``ngat.driver.run``,
+its peak resident memory (``ru_maxrss`` of that process: ~150 MB of it is Python and NGSolve),
+the largest and the final number of elements. The errors are measured against the stored
+reference (``geometries/reference/<scene>.json``, ``scripts/reference_two_slits.py``):
+
+- ``energy_1.0``, ``energy_1.4``: |E − E_ref| / |E_ref| of the total energy at t = 1.0, 1.4;
+- ``fracture_time``: |t_f − t_f,ref|, t_f the first load time at which {v ≥ 0.1} no longer
+  connects the Dirichlet regions (two-slits only: nothing breaks in surfing);
+- ``crack_path``: the largest distance between the two runs' crack centre lines, taken as the
+  Hausdorff distance between the polylines traced by each crack tip over the load steps with
+  t ≤ 1.4 before either run breaks (once the cracks have joined, a slit's tip is measured on
+  the other slit's side), the larger over the slits;
+- ``toughness`` (surfing): |dS/da − 1|, dS/da the surface energy per unit crack advance while
+  the crack runs (t ≥ 0.5, :func:`geometries.surfing.steady_rates`) and 1 = G_c, the toughness
+  of the continuous AT functional; a crack that does not run (tip speed < V/2) has no value.
+
+Output in ``--out`` (default ``results/work_precision``): ``work_precision.csv`` (one row per
+case), ``work_precision.png`` (log–log error against wall time, one row of panels per scene,
+one panel per error measure, one curve per method, points labelled by TOL or h),
+``summary.json`` (the 10× check), and each case's raw measures in ``runs/`` (``--reuse`` takes
+them instead of running the case again). ``--quick`` runs the scenes' quick variants at one TOL
+and one h (the tests use it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import resource
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import NullFormatter  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ["two-slits", "surfing"]
+TOLS = [0.6, 0.3, 0.15, 0.075]
+HS = [0.1, 0.05, 0.025]
+MEASURES = ["energy_1.0", "energy_1.4", "fracture_time", "crack_path", "toughness"]
+SURFING_WINDOW = 0.5
+"""Surfing: the toughness is fitted over t ≥ this (after the ramp and the first jump)."""
+
+
+def overrides(method: str, value: float) -> dict:
+    """Return the parameter changes of a case: ``tol`` (adaptive) or ``maxh`` (uniform)."""
+    if method == "adaptive":
+        return {"tol": value}
+    return {"adapt": "fixed", "maxh": value}
+
+
+def run_case(scene_name: str, method: str, value: float, folder: str, quick: bool) -> dict:
+    """Run one case (in a fresh process) and return its cost and per-step measures."""
+    from ngat.driver import run
+    from ngat.scene import load_scene
+
+    scene = load_scene(scene_name)
+    parameters, times = scene.configure(quick=quick, overrides=overrides(method, value))
+    begin = time.perf_counter()
+    result = run(scene, parameters, times, Path(folder))
+    wall = time.perf_counter() - begin
+    keys = ["t", "total", "surface", "elements"] + [
+        k for k in result.records[0] if k.startswith("tip")
+    ]
+    return {
+        "wall_s": wall,
+        "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "steps": {k: [r[k] for r in result.records] for k in keys},
+        "fracture_time": result.summary.get("fracture_time"),
+    }
+
+
+def at_time(steps: dict, key: str, t: float) -> float:
+    """Return ``steps[key]`` at load time ``t`` (NaN if the run has no such step)."""
+    times = np.asarray(steps["t"])
+    hit = np.flatnonzero(np.isclose(times, t, atol=1e-9))
+    return float(np.asarray(steps[key])[hit[0]]) if len(hit) else math.nan
+
+
+def polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Return the distance of each point to the polyline through ``line`` (in order)."""
+    if len(line) == 1:
+        return np.linalg.norm(points - line[0], axis=1)
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    length = np.maximum((ab**2).sum(axis=1), 1e-300)
+    s = np.clip(((points[:, None, :] - a) * ab).sum(axis=2) / length, 0, 1)
+    nearest = a + s[..., None] * ab
+    return np.linalg.norm(points[:, None, :] - nearest, axis=2).min(axis=1)
+
+
+def path_distance(steps: dict, reference: dict, until: float = 1.4) -> float:
+    """Return the Hausdorff distance between the two runs' tip trajectories (t ≤ ``until``)."""
+    worst = 0.0
+    for i in (1, 2):
+        if f"tip{i}_x" not in steps:
+            continue
+        tracks = []
+        for s in (steps, reference):
+            keep = np.asarray(s["t"]) <= until + 1e-9
+            xy = np.stack([np.asarray(s[f"tip{i}_x"]), np.asarray(s[f"tip{i}_y"])], axis=1)
+            tracks.append(xy[keep])
+        worst = max(
+            worst,
+            polyline_distance(tracks[0], tracks[1]).max(),
+            polyline_distance(tracks[1], tracks[0]).max(),
+        )
+    return float(worst)
+
+
+def toughness(steps: dict, speed: float) -> float:
+    """Return dS/da over t ≥ :data:`SURFING_WINDOW`, NaN if the crack does not run."""
+    from geometries.surfing import steady_rates
+
+    t = np.asarray(steps["t"])
+    keep = t >= SURFING_WINDOW - 1e-9
+    tip, surface = np.asarray(steps["tip1_x"]), np.asarray(steps["surface"])
+    rates = steady_rates(t[keep], tip[keep], surface[keep])
+    return rates["toughness"] if rates["speed"] > speed / 2 else math.nan
+
+
+def errors(scene_name: str, case: dict, reference: dict) -> dict:
+    """Return the error measures of a case against the reference."""
+    steps, ref = case["steps"], reference["steps"]
+    result = {}
+    for t in (1.0, 1.4):
+        e, e_ref = at_time(steps, "total", t), at_time(ref, "total", t)
+        result[f"energy_{t}"] = abs(e - e_ref) / abs(e_ref)
+    if scene_name == "two-slits":
+        t_f, t_ref = case["fracture_time"], reference["fracture_time"]
+        result["fracture_time"] = abs(t_f - t_ref) if t_f is not None else math.nan
+    else:
+        result["fracture_time"] = math.nan
+    # Once the cracks have joined, each slit's tip lies on the other slit's side: compare the
+    # tracks only before either run breaks.
+    breaks = [t for t in (case["fracture_time"], reference["fracture_time"]) if t is not None]
+    result["crack_path"] = path_distance(steps, ref, until=min([1.4] + breaks) - 1e-6)
+    if scene_name == "surfing":
+        from geometries.surfing import SPEED
+
+        result["toughness"] = abs(toughness(steps, SPEED) - 1)
+    else:
+        result["toughness"] = math.nan
+    return result
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    """Draw error against wall time, log–log: a row of panels per scene, a curve per method."""
+    scenes = sorted({r["scene"] for r in rows}, key=SCENES.index)
+    fig, axes = plt.subplots(
+        len(scenes), len(MEASURES), figsize=(3.2 * len(MEASURES), 3.0 * len(scenes)),
+        squeeze=False,
+    )  # fmt: skip
+    for i, scene in enumerate(scenes):
+        for j, measure in enumerate(MEASURES):
+            ax = axes[i, j]
+            for method, style in (("adaptive", "o-"), ("uniform", "s--")):
+                pts = [
+                    (r["wall_s"], r[measure], r["value"])
+                    for r in rows
+                    if r["scene"] == scene and r["method"] == method
+                    and np.isfinite(r[measure]) and r[measure] > 0
+                ]  # fmt: skip
+                if not pts:
+                    continue
+                wall, err, value = zip(*sorted(pts), strict=True)
+                ax.loglog(wall, err, style, label=method)
+                for w, e, v in pts:
+                    label = f"TOL {v:g}" if method == "adaptive" else f"h {v:g}"
+                    ax.annotate(
+                        label, (w, e), fontsize=6, xytext=(3, 3), textcoords="offset points"
+                    )
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.yaxis.set_minor_formatter(NullFormatter())
+            ax.set_title(f"{scene}: {measure}", fontsize=9)
+            ax.set_xlabel("wall time [s]", fontsize=8)
+            if ax.has_data():
+                ax.legend(fontsize=7)
+            else:
+                ax.text(0.5, 0.5, "n/a", ha="center", va="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def ten_times_check(rows: list[dict], scene: str = "two-slits", h: float = 0.025) -> dict:
+    """Return the cheapest adaptive run at least as accurate as the uniform run ``h``.
+
+    Accuracy: the relative error of the total energy at t = 1.0; the speed-up is the ratio of
+    the two wall times, measured in this run of the script.
+    """
+    uniform = [
+        r for r in rows if r["scene"] == scene and r["method"] == "uniform" and r["value"] == h
+    ]
+    if not uniform:
+        return {}
+    target = uniform[0]
+    better = [
+        r for r in rows if r["scene"] == scene and r["method"] == "adaptive"
+        and r["energy_1.0"] <= target["energy_1.0"]
+    ]  # fmt: skip
+    if not better:
+        return {"uniform_wall_s": target["wall_s"], "uniform_error": target["energy_1.0"]}
+    best = min(better, key=lambda r: r["wall_s"])
+    return {
+        "uniform_h": h,
+        "uniform_wall_s": round(target["wall_s"], 2),
+        "uniform_error": target["energy_1.0"],
+        "adaptive_tol": best["value"],
+        "adaptive_wall_s": round(best["wall_s"], 2),
+        "adaptive_error": best["energy_1.0"],
+        "speedup": round(target["wall_s"] / best["wall_s"], 1),
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="quick variants, one TOL, one h")
+    parser.add_argument("--scenes", nargs="+", default=SCENES, choices=SCENES)
+    parser.add_argument("--tols", nargs="+", type=float, default=None)
+    parser.add_argument("--hs", nargs="+", type=float, default=None)
+    parser.add_argument("--out", type=Path, default=Path("results/work_precision"))
+    parser.add_argument("--reuse", action="store_true", help="reuse the cases already run")
+    parser.add_argument("--reference", type=Path, default=ROOT / "geometries" / "reference")
+    args = parser.parse_args(argv)
+    tols = args.tols or ([0.6] if args.quick else TOLS)
+    hs = args.hs or ([0.2] if args.quick else HS)
+    (args.out / "runs").mkdir(parents=True, exist_ok=True)
+    cases = []
+    for scene in args.scenes:
+        for method, values in (("adaptive", tols), ("uniform", hs)):
+            for value in values:
+                name = f"{scene}_{method}_{value:g}{'_quick' if args.quick else ''}"
+                raw = args.out / "runs" / f"{name}.json"
+                if args.reuse and raw.exists():
+                    case = json.loads(raw.read_text())
+                else:
+                    with ProcessPoolExecutor(max_workers=1, max_tasks_per_child=1) as pool:
+                        case = pool.submit(
+                            run_case, scene, method, value, str(args.out / "runs" / name),
+                            args.quick,
+                        ).result()  # fmt: skip
+                    raw.write_text(json.dumps(case))
+                print(f"{name}: {case['wall_s']:.1f} s", flush=True)
+                cases.append((scene, method, value, case))
+    rows = []
+    for scene, method, value, case in cases:
+        reference = json.loads((args.reference / f"{scene.replace('-', '_')}.json").read_text())
+        row = {
+            "scene": scene, "method": method, "value": value,
+            "wall_s": round(case["wall_s"], 2), "peak_memory_mb": round(case["peak_memory_mb"]),
+            "max_elements": max(case["steps"]["elements"]),
+            "final_elements": case["steps"]["elements"][-1],
+            "t_fracture": case["fracture_time"],
+        }  # fmt: skip
+        row.update(errors(scene, case, reference))
+        rows.append(row)
+    with open(args.out / "work_precision.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    plot(rows, args.out / "work_precision.png")
+    summary = {"ten_times_check": ten_times_check(rows)}
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
+    print(json.dumps(summary, indent=2))
+
+
+if __name__ == "__main__":
+    main()
