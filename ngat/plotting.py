@@ -69,11 +69,15 @@ class Frame:
     path: Path
 
 
+TEXT_COLUMNS = {"warnings"}
+
+
 def read_energies(path: Path) -> dict[str, np.ndarray]:
     """Return the columns of ``energies.csv`` as float arrays, keeping only complete rows.
 
-    A row is complete when every column has a value; a crash while a row is written leaves an
-    incomplete last row, which is dropped. ``True``/``False`` become 1/0.
+    A row is complete when every numeric column has a value; a crash while a row is written
+    leaves an incomplete last row, which is dropped. ``True``/``False`` become 1/0; text columns
+    (``warnings``) are left out.
 
     Parameters
     ----------
@@ -82,7 +86,7 @@ def read_energies(path: Path) -> dict[str, np.ndarray]:
     """
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        columns = reader.fieldnames or []
+        columns = [c for c in reader.fieldnames or [] if c not in TEXT_COLUMNS]
         rows = []
         for row in reader:
             try:
