@@ -5,8 +5,9 @@ Each load step is checked for: the alternating minimisation stopping at its iter
 (``v-out-of-bounds``: Proposition 3 needs Hypothesis A, which obtuse elements violate, unless the
 v-step is bounded), an iteration that increased I_j although every half-step minimises it
 (``energy-increase``), and ε under-resolved by the mesh where the crack is
-(``eps-under-resolved``: the largest element meeting the crack {v < 0.1} is at least ε wide,
-so the profile 1 − exp(−d/(2ε)) is not resolved and the crack costs ≈ 1 + h/(4ε) times G_c).
+(``eps-under-resolved``: the largest element meeting the crack {v < 0.1}, or before a crack
+exists the most damaged vertex, is at least ε wide, so the profile 1 − exp(−d/(2ε)) is not
+resolved and the crack costs ≈ 1 + h/(4ε) times G_c).
 Depending on ``on_problem`` each is a warning (logged, listed in ``summary.json`` under
 ``diagnostics`` and in the step's ``warnings`` column) or an error that stops the run, with the
 results written so far kept.
@@ -17,10 +18,12 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+import numpy as np
+
 from ngat.minimization import StepResult
 from ngat.state import ATState
 
-__all__ = ["Diagnostics", "ProblemError", "ROUND_OFF"]
+__all__ = ["Diagnostics", "ProblemError", "ROUND_OFF", "damage_zone"]
 
 log = logging.getLogger(__name__)
 
@@ -29,6 +32,24 @@ ROUND_OFF = 1e-10
 
 class ProblemError(RuntimeError):
     """A detected problem, raised when ``on_problem="error"``."""
+
+
+def damage_zone(v: np.ndarray, elements: np.ndarray) -> tuple[np.ndarray, str]:
+    """Return the elements where ε must be resolved, and where they are (for the message).
+
+    Where a crack exists these are the elements meeting {v < 0.1}. Before that, once the body
+    is damaged at all (min v < 0.9), they are the elements at the most damaged vertex: on a
+    mesh too coarse for the profile, v never gets near 0 (the band of one element costs
+    ≈ 1 + h/(4ε) times G_c), so {v < 0.1} stays empty although ε is not resolved.
+    """
+    near = v[elements]
+    crack = (near < 0.1).any(axis=1)
+    if crack.any():
+        return crack, "where v < 0.1"
+    v_min = float(v.min())
+    if v_min >= 0.9:
+        return np.zeros(len(elements), dtype=bool), ""
+    return (near <= v_min).any(axis=1), f"at the most damaged point (min v = {v_min:.3g})"
 
 
 class Diagnostics:
@@ -97,13 +118,13 @@ class Diagnostics:
                 f"I_j increased in {result.energy_increases} iteration(s) on an unchanged mesh",
             ),
         ]
-        crack_zone = (v[state.arrays.elements] < 0.1).any(axis=1)
-        h_crack = float(state.arrays.diameter[crack_zone].max()) if crack_zone.any() else 0.0
+        zone, where = damage_zone(v, state.arrays.elements)
+        h_zone = float(state.arrays.diameter[zone].max()) if zone.any() else 0.0
         checks.append(
             (
                 "eps-under-resolved",
-                h_crack >= eps,
-                f"elements up to h = {h_crack:.3g} ≥ ε = {eps:.3g} where v < 0.1: refine "
+                h_zone >= eps,
+                f"elements up to h = {h_zone:.3g} ≥ ε = {eps:.3g} {where}: refine "
                 "(smaller tol or h_floor) or increase eps",
             )
         )

@@ -183,6 +183,7 @@ def run(
                 v_bound_active=state.bound_active,
                 linear_solves=step.linear_solves,
                 fallbacks=step.fallbacks,
+                newton_steps=step.newton_steps,
             )
             record.update(crack_measures(state, scene))
             if "fracture_time" not in summary and record.get("connected") is False:

@@ -10,12 +10,14 @@ Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ f
 from __future__ import annotations
 
 import logging
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ngat.estimators import mu_estimator, nu_estimator
+from ngat.newton import NewtonSolver
 from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
 from ngat.state import ATState
@@ -31,6 +33,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 HalfStepMonitor = Callable[[str, ATState], None]
+
+_newton_solvers: weakref.WeakKeyDictionary[ATState, NewtonSolver] = weakref.WeakKeyDictionary()
+"""One Newton solver per state, so that its graph and factorisation outlive a load step."""
 
 
 class ConvergenceError(RuntimeError):
@@ -59,7 +64,9 @@ class StepResult:
         Iterations on an unchanged mesh that increased I_j (should be 0: each half-step is a
         minimisation).
     fallbacks
-        Accelerated iterates rejected by the energy safeguard.
+        Accelerated iterates rejected by the energy safeguard, and rejected Newton steps.
+    newton_steps
+        Accepted Newton steps (``nonlinear="newton"``).
     linear_solves
         Linear systems solved during the step.
     reason
@@ -74,6 +81,7 @@ class StepResult:
     energies: list[float] = field(default_factory=list)
     energy_increases: int = 0
     fallbacks: int = 0
+    newton_steps: int = 0
     linear_solves: int = 0
     reason: str = ""
 
@@ -179,7 +187,11 @@ def alternating_minimization(
     result = StepResult()
     solves_before = state.linear_solves
     state.v_values[state.crack_set()] = 0.0
-    accelerator = Accelerator(solver) if solver.nonlinear != "am" else None
+    accelerator = Accelerator(solver) if solver.nonlinear in ("overrelaxed", "anderson") else None
+    newton = None
+    if solver.nonlinear == "newton":
+        newton = _newton_solvers.setdefault(state, NewtonSolver(state))
+    newton_below = solver.newton_switch
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec
@@ -211,6 +223,14 @@ def alternating_minimization(
             result.converged = True
             result.reason = "converged"
             break
+        if newton and change < newton_below:
+            if newton.step(state.crack_set()):
+                result.newton_steps += 1
+                result.energies.append(state.energies()["total"])
+            else:
+                # Too far from a minimiser for Newton: wait until the iteration has halved.
+                result.fallbacks += 1
+                newton_below = change / 2
     else:
         result.reason = "iteration limit"
         log.warning(

@@ -100,13 +100,19 @@ class SolverParameters:
         factor is refreshed (:class:`ngat.linear.LaggedCholesky`); 0: refactorise every solve.
     nonlinear
         Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
-        minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old), or
+        minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
         ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
-        accelerated steps fall back to the plain one whenever it has lower energy.
+        accelerated steps fall back to the plain one whenever it has lower energy; or
+        ``"newton"``: alternating minimisation until ‖v^n − v^{n−1}‖_∞ < ``newton_switch``,
+        then a Newton step on the coupled system with an energy line search after each
+        iteration (:mod:`ngat.newton`).
     omega
         Over-relaxation factor ω.
     anderson_depth
         Number of previous iterates Anderson acceleration combines.
+    newton_switch
+        Change ‖v^n − v^{n−1}‖_∞ of an alternating-minimisation iteration below which Newton
+        steps are tried (``nonlinear="newton"``).
     bounded_v
         Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.state.ATState.solve_v`).
     on_problem
@@ -120,6 +126,7 @@ class SolverParameters:
     nonlinear: str = "am"
     omega: float = 1.5
     anderson_depth: int = 5
+    newton_switch: float = 0.1
     bounded_v: bool = True
     on_problem: str = "warn"
 
@@ -129,10 +136,12 @@ class SolverParameters:
             raise ParameterError(f"am_tol must be positive, got am_tol={self.am_tol}")
         if not self.am_max_iter >= 1:
             raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
-        if self.nonlinear not in ("am", "overrelaxed", "anderson"):
+        if self.nonlinear not in ("am", "overrelaxed", "anderson", "newton"):
             raise ParameterError(
-                f"nonlinear must be am, overrelaxed or anderson, got {self.nonlinear!r}"
+                f"nonlinear must be am, overrelaxed, anderson or newton, got {self.nonlinear!r}"
             )
+        if not self.newton_switch > 0:
+            raise ParameterError(f"newton_switch must be positive, got {self.newton_switch}")
         if not 0 < self.omega < 2:
             raise ParameterError(f"omega must lie in (0, 2), got omega={self.omega}")
         if not self.anderson_depth >= 1:

@@ -23,7 +23,7 @@ from ngat.linear import LaggedCholesky
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
 
-__all__ = ["ATState", "SceneError"]
+__all__ = ["ATState", "SceneError", "lumped_energies"]
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +32,29 @@ Load = Callable[[Parameter], ngsolve.CoefficientFunction]
 
 class SceneError(ValueError):
     """The scene or its mesh cannot define a valid problem (e.g. no Dirichlet region)."""
+
+
+def lumped_energies(
+    arrays: MeshArrays, model: ModelParameters, u: np.ndarray, v: np.ndarray
+) -> dict[str, float]:
+    """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
+
+    Parameters
+    ----------
+    arrays
+        Element geometry of the mesh.
+    model
+        ε, η and α = 1/(4ε).
+    u, v
+        Nodal values of the two P1 fields.
+    """
+    grad_u = arrays.gradient(u)
+    grad_v = arrays.gradient(v)
+    bulk = np.sum(arrays.area * (arrays.vertex_mean(v * v) + model.eta) * (grad_u**2).sum(1))
+    surface = model.alpha * np.dot(arrays.mass, (1 - v) ** 2) + model.eps * np.sum(
+        arrays.area * (grad_v**2).sum(1)
+    )
+    return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 
 
 class ATState:
@@ -290,17 +313,7 @@ class ATState:
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
         """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7)."""
-        arrays = self.arrays
-        v = self.v_values
-        grad_u = arrays.gradient(self.u_values)
-        grad_v = arrays.gradient(v)
-        bulk = np.sum(
-            arrays.area * (arrays.vertex_mean(v * v) + self.model.eta) * (grad_u**2).sum(1)
-        )
-        surface = self.model.alpha * np.dot(arrays.mass, (1 - v) ** 2) + self.model.eps * np.sum(
-            arrays.area * (grad_v**2).sum(1)
-        )
-        return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
+        return lumped_energies(self.arrays, self.model, self.u_values, self.v_values)
 
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.

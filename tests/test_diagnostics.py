@@ -73,7 +73,7 @@ def coarse_two_slits(**overrides):
 
 
 def test_not_converged(tmp_path):
-    scene, parameters, times = coarse_two_slits(am_max_iter=2, eps=0.5)
+    scene, parameters, times = coarse_two_slits(am_max_iter=2, eps=1.0)
     result = run(scene, parameters, times, tmp_path / "run")
     assert not result.records[-1]["converged"]
     assert problems(tmp_path / "run") == {"not-converged"}
@@ -86,6 +86,17 @@ def test_eps_under_resolved(tmp_path):
     result = run(scene, parameters, np.array([0.0, 1.5, 2.5]), tmp_path / "run")
     assert result.records[-1]["v_min"] < 0.1
     assert problems(tmp_path / "run") == {"eps-under-resolved"}
+
+
+def test_eps_under_resolved_before_any_crack(tmp_path):
+    # Elements 5ε wide: the body never cracks (min v stays near 0.7, {v < 0.1} is empty), and
+    # the too coarse mesh at the most damaged point must still be named.
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.25})
+    result = run(scene, parameters, np.array([0.0, 1.0, 1.6]), tmp_path / "run")
+    assert 0.1 < result.records[-1]["v_min"] < 0.9
+    assert problems(tmp_path / "run") == {"eps-under-resolved"}
+    assert "most damaged point" in (tmp_path / "run" / "run.log").read_text()
 
 
 def test_energy_increase_is_detected(tmp_path, monkeypatch):
@@ -123,7 +134,7 @@ def test_nan_stops_the_run_and_is_named(tmp_path, monkeypatch):
 
 
 def test_on_problem_error_stops_after_writing_the_step(tmp_path):
-    scene, parameters, times = coarse_two_slits(am_max_iter=2, on_problem="error")
+    scene, parameters, times = coarse_two_slits(am_max_iter=2, eps=1.0, on_problem="error")
     with pytest.raises(ProblemError, match="not-converged"):
         run(scene, parameters, times, tmp_path / "run")
     rows = (tmp_path / "run" / "energies.csv").read_text().strip().splitlines()

@@ -1,14 +1,19 @@
 """Nonlinear solvers and pointwise irreversibility (issue 6).
 
-Over-relaxed and Anderson-accelerated alternating minimisation must reach the same critical
-point as plain alternating minimisation, with fewer linear solves where the crack moves.
+Over-relaxed and Anderson-accelerated alternating minimisation and Newton's method must reach
+the same critical point as plain alternating minimisation, with fewer linear solves where the
+crack moves; Newton's gradient and Hessian must be those of I_j (eq. 7).
 """
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+from ngsolve import H1, GridFunction
 
 from ngat.driver import run
+from ngat.newton import NewtonSolver, energy_form
 from ngat.scene import load_scene
+from ngat.state import ATState
 
 TIMES = np.array([0.0, 0.5, 1.0, 1.2, 1.3])  # the last two steps are in the growth phase
 
@@ -17,7 +22,7 @@ TIMES = np.array([0.0, 0.5, 1.0, 1.2, 1.3])  # the last two steps are in the gro
 def runs(tmp_path_factory):
     scene = load_scene("two-slits")
     results = {}
-    for solver in ("am", "overrelaxed", "anderson"):
+    for solver in ("am", "overrelaxed", "anderson", "newton"):
         parameters, _ = scene.configure(
             overrides={
                 "adapt": "fixed",
@@ -31,7 +36,7 @@ def runs(tmp_path_factory):
     return results
 
 
-@pytest.mark.parametrize("solver", ["overrelaxed", "anderson"])
+@pytest.mark.parametrize("solver", ["overrelaxed", "anderson", "newton"])
 def test_same_energy_as_plain_alternating_minimization(runs, solver):
     for ours, plain in zip(runs[solver].records, runs["am"].records, strict=True):
         assert ours["converged"]
@@ -43,6 +48,44 @@ def test_anderson_needs_fewer_linear_solves_in_the_growth_phase(runs):
     plain = sum(r["linear_solves"] for r in runs["am"].records[growth])
     anderson = sum(r["linear_solves"] for r in runs["anderson"].records[growth])
     assert anderson < 0.6 * plain, (anderson, plain)
+
+
+def test_newton_needs_fewer_iterations_in_the_growth_phase(runs):
+    growth = slice(3, None)
+    plain = sum(r["am_iterations"] for r in runs["am"].records[growth])
+    newton = sum(r["am_iterations"] for r in runs["newton"].records[growth])
+    assert sum(r["newton_steps"] for r in runs["newton"].records[growth]) > 0
+    assert newton < 0.3 * plain, (newton, plain)
+
+
+def test_newton_gradient_and_hessian_are_those_of_the_energy():
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
+    mesh = scene.make_mesh(0.5)
+    state = ATState(mesh, parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.3)
+    rng = np.random.default_rng(1)
+    u = state.u_values + 0.1 * rng.random(state.arrays.nv)
+    v = rng.random(state.arrays.nv)
+    fes = H1(mesh, order=1)
+    space = fes * fes
+    form, w = energy_form(space, parameters.model), GridFunction(space)
+    w.vec.FV().NumPy()[:] = np.concatenate([u, v])
+    gradient = w.vec.CreateVector()
+    form.Apply(w.vec, gradient)
+    form.AssembleLinearization(w.vec)
+    newton = NewtonSolver(state)
+    newton._setup()
+    n2 = 2 * state.arrays.nv
+    rowptr = np.r_[0, np.cumsum(np.bincount(newton.entry_rows, minlength=n2))]
+    ours = sp.csr_matrix((newton.hessian_values(u, v), newton.entry_cols, rowptr), (n2, n2))
+    values, cols, rowptr = map(np.asarray, form.mat.CSR())
+    theirs = sp.csr_matrix((values, cols, rowptr), (n2, n2))
+    assert abs(ours - theirs).max() < 1e-12 * abs(theirs).max()
+    g = gradient.FV().NumPy()
+    assert np.abs(newton.gradient(u, v) - g).max() < 1e-12 * np.abs(g).max()
+    state.u_values[:], state.v_values[:] = u, v
+    assert form.Energy(w.vec) == pytest.approx(state.energies()["total"], rel=1e-13)
 
 
 def test_pointwise_irreversibility_keeps_v_below_the_previous_step(tmp_path):

@@ -1,0 +1,193 @@
+"""Newton's method on the coupled (u, v) system of one load step, with an energy line search.
+
+I_j(u, v) of eq. (7) is a polynomial in the nodal values; its gradient and Hessian are exact
+and, unlike alternating minimisation, Newton sees the coupling block ∂²I_j/∂u∂v. With
+c_T = mean_T(v²) + η, the lumped mass m and K_T the element stiffness matrix:
+
+- ∂I/∂u = 2 Σ_T c_T K_T u,  ∂I/∂v = 2 (B(u) v − α m)  (B: the matrix of b_j, Definition 2);
+- ∂²I/∂u² = 2 Σ_T c_T K_T,  ∂²I/∂v² = 2 B(u),
+  ∂²I/∂v_a∂u_b = (4/3) |T| v_a ∇u_T·∇φ_b on each element T ∋ a, b.
+
+:func:`energy_form` states the same functional as an NGSolve ``Variation`` with the vertex
+rule (the definition; a test checks the vectorised gradient and Hessian against NGSolve's).
+A Newton step solves H δ = −∇I_j with u fixed on Ω_D and v fixed on CR(t_k) and on the bounds
+where the gradient pushes v out of [0, 1] (a projected Newton method), then backtracks along
+P(w + s δ), s = 1, ½, ¼, … until I_j decreases by the Armijo condition. Away from a minimiser
+the Hessian may be indefinite and δ no descent direction: the step is then rejected and the
+caller continues with alternating minimisation, so Newton starts from an
+alternating-minimisation iterate (:func:`ngat.minimization.alternating_minimization`).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import ngsolve
+import numpy as np
+from ngsolve import BilinearForm, Variation, grad
+from ngsolve.la import SparseMatrixd
+
+from ngat.forms import lumped_dx
+from ngat.parameters import ModelParameters
+from ngat.state import ATState, lumped_energies
+
+__all__ = ["NewtonSolver", "energy_form"]
+
+log = logging.getLogger(__name__)
+
+
+def energy_form(space: ngsolve.FESpace, model: ModelParameters) -> BilinearForm:
+    """Return I_j(u, v) (eq. 7) as an NGSolve energy on the product space P1 × P1.
+
+    ``form.Energy``, ``form.Apply`` and ``form.AssembleLinearization`` then give I_j, its
+    gradient and its Hessian.
+    """
+    u, v = space.TrialFunction()
+    energy = (v * v + model.eta) * grad(u) * grad(u)
+    energy += model.alpha * (1 - v) * (1 - v) + model.eps * grad(v) * grad(v)
+    form = BilinearForm(space)
+    form += Variation(energy * lumped_dx())
+    return form
+
+
+class NewtonSolver:
+    """Projected Newton steps on I_j(u, v) for the current mesh of an :class:`ATState`.
+
+    The Hessian's graph (the P1 graph, four blocks) and the symbolic part of its sparse
+    factorisation are built once per mesh; every step writes the values in place. Fixed DOFs
+    get identity rows, so the graph and the factorisation's free set never change.
+
+    Parameters
+    ----------
+    state
+        Fields and model.
+    armijo
+        Sufficient-decrease constant c of I(P(w + sδ)) ≤ I(w) + c s ∇I·δ.
+    max_halvings
+        Backtracking steps before the Newton step is rejected.
+    """
+
+    def __init__(self, state: ATState, armijo: float = 1e-4, max_halvings: int = 10):
+        self.state = state
+        self.armijo = armijo
+        self.max_halvings = max_halvings
+        self._arrays = None
+
+    def _setup(self) -> None:
+        """Build the block graph, the scatter positions and the work vectors for this mesh."""
+        arrays = self.state.arrays
+        n, el = arrays.nv, arrays.elements
+        rows = np.broadcast_to(el[:, :, None], (arrays.ne, 3, 3)).ravel()
+        cols = np.broadcast_to(el[:, None, :], (arrays.ne, 3, 3)).ravel()
+        # Blocks uu, vv, vu (row v_a, column u_b) and its transpose uv.
+        block_rows = np.concatenate([rows, rows + n, rows + n, cols])
+        block_cols = np.concatenate([cols, cols + n, cols, rows + n])
+        local_keys = block_rows * (2 * n) + block_cols
+        graph = np.unique(local_keys)
+        self.matrix = SparseMatrixd.CreateFromCOO(
+            graph // (2 * n), graph % (2 * n), np.ones(len(graph)), 2 * n, 2 * n
+        )
+        _, csr_cols, rowptr = self.matrix.CSR()
+        csr_cols = np.asarray(csr_cols, dtype=np.int64)
+        rowptr = np.asarray(rowptr, dtype=np.int64)
+        self.entry_rows = np.repeat(np.arange(2 * n), np.diff(rowptr))
+        self.entry_cols = csr_cols
+        keys = self.entry_rows * (2 * n) + csr_cols
+        self.position = np.searchsorted(keys, local_keys)
+        self.diagonal = np.searchsorted(keys, np.arange(2 * n) * (2 * n + 1))
+        self.nnz = len(keys)
+        self.inverse = None
+        self.rhs = self.matrix.CreateColVector()
+        self.delta = self.matrix.CreateColVector()
+        self._arrays = arrays
+
+    def gradient(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Return ∇I_j at (u, v), stacked (∂I/∂u, ∂I/∂v)."""
+        arrays, model = self.state.arrays, self.state.model
+        el, area = arrays.elements, arrays.area
+        grad_u, grad_v = arrays.gradient(u), arrays.gradient(v)
+        c = arrays.vertex_mean(v * v) + model.eta
+        flux_u = np.einsum("eak,ek->ea", arrays.grad_phi, grad_u) * (area * c)[:, None]
+        flux_v = np.einsum("eak,ek->ea", arrays.grad_phi, grad_v) * area[:, None]
+        g_u = 2 * np.bincount(el.ravel(), weights=flux_u.ravel(), minlength=arrays.nv)
+        strain = np.bincount(
+            el.ravel(), weights=np.repeat(area * (grad_u**2).sum(1) / 3, 3), minlength=arrays.nv
+        )
+        g_v = 2 * (
+            strain * v - model.alpha * arrays.mass * (1 - v)
+            + model.eps * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
+        )  # fmt: skip
+        return np.concatenate([g_u, g_v])
+
+    def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
+        arrays, model = self.state.arrays, self.state.model
+        el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
+        grad_u = arrays.gradient(u)
+        c = arrays.vertex_mean(v * v) + model.eta
+        uu = 2 * c[:, None, None] * stiffness
+        mass_term = area * ((grad_u**2).sum(1) + model.alpha) / 3
+        vv = 2 * model.eps * stiffness
+        vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
+        u_flux = np.einsum("ek,ebk->eb", grad_u, arrays.grad_phi)
+        vu = (4 / 3) * area[:, None, None] * v[el][:, :, None] * u_flux[:, None, :]
+        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
+        return np.bincount(self.position, weights=local, minlength=self.nnz)
+
+    def step(self, crack: np.ndarray) -> bool:
+        """Try one Newton step from the state's (u, v); return whether it was accepted.
+
+        Parameters
+        ----------
+        crack
+            Boolean DOF mask of CR(t_k), where v stays 0.
+
+        Returns
+        -------
+        bool
+            ``True`` if the state now holds the Newton iterate, ``False`` if the direction was
+            not a descent direction or no step length decreased I_j (the state is unchanged).
+        """
+        state = self.state
+        if self._arrays is not state.arrays:
+            self._setup()
+        n = state.arrays.nv
+        u, v = state.u_values.copy(), state.v_values.copy()
+        upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
+        with state.timer("assembly"):
+            gradient = self.gradient(u, v)
+            g_v = gradient[n:]
+            held = np.concatenate(
+                [state.dirichlet, crack | ((v <= 0) & (g_v > 0)) | ((v >= upper) & (g_v < 0))]
+            )
+            values = self.hessian_values(u, v)
+            values[held[self.entry_rows] | held[self.entry_cols]] = 0.0
+            values[self.diagonal[held]] = 1.0
+            self.matrix.AsVector().FV().NumPy()[:] = values
+        with state.timer("solve"):
+            if self.inverse is None:
+                self.inverse = self.matrix.Inverse(inverse="sparsecholesky")
+            else:
+                self.inverse.Update()
+            self.rhs.FV().NumPy()[:] = np.where(held, 0.0, -gradient)
+            self.delta.data = self.inverse * self.rhs
+            state.linear_solves += 1
+        delta = self.delta.FV().NumPy().copy()
+        slope = float(np.dot(gradient, delta))
+        if not slope < 0:
+            log.debug("Newton direction is not a descent direction (∇I·δ = %.3g)", slope)
+            return False
+        start = lumped_energies(state.arrays, state.model, u, v)["total"]
+        scale = 1.0
+        for _ in range(self.max_halvings + 1):
+            u_trial = u + scale * delta[:n]
+            v_trial = np.clip(v + scale * delta[n:], 0.0, upper)
+            v_trial[crack] = 0.0
+            energy = lumped_energies(state.arrays, state.model, u_trial, v_trial)["total"]
+            if energy <= start + self.armijo * scale * slope:
+                state.u_values[:] = u_trial
+                state.v_values[:] = v_trial
+                return True
+            scale /= 2
+        log.debug("Newton line search found no decrease of I_j")
+        return False
