@@ -5,6 +5,12 @@ Algorithm 1 of the paper minimises I_j in u with v frozen, then in v with u froz
 Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ for the u-step,
 ν for the v-step, Proposition 4), mark, refine, until the estimator is ≤ TOL. The variant
 ``"after"`` runs Algorithm 1 to convergence first and refines only then.
+
+``nonlinear`` selects how the iterates are formed, all with the same stopping test on an
+alternating-minimisation iteration: plain (the paper), over-relaxed or Anderson-accelerated
+(:class:`Accelerator`, with an energy safeguard), and with ``newton``/``anderson-newton`` a
+Newton step on the coupled system (:class:`ngat.newton.NewtonSolver`) after every iteration
+once ‖v^n − v^{n−1}‖_∞ < ``newton_switch``.
 """
 
 from __future__ import annotations
@@ -187,9 +193,11 @@ def alternating_minimization(
     result = StepResult()
     solves_before = state.linear_solves
     state.v_values[state.crack_set()] = 0.0
-    accelerator = Accelerator(solver) if solver.nonlinear in ("overrelaxed", "anderson") else None
+    accelerator = None
+    if solver.nonlinear in ("overrelaxed", "anderson", "anderson-newton"):
+        accelerator = Accelerator(solver)
     newton = None
-    if solver.nonlinear == "newton":
+    if solver.nonlinear in ("newton", "anderson-newton"):
         newton = _newton_solvers.setdefault(state, NewtonSolver(state))
     newton_below = solver.newton_switch
     while result.iterations < solver.am_max_iter:
@@ -227,6 +235,8 @@ def alternating_minimization(
             if newton.step(state.crack_set()):
                 result.newton_steps += 1
                 result.energies.append(state.energies()["total"])
+                if accelerator:
+                    accelerator.restart()
             else:
                 # Too far from a minimiser for Newton: wait until the iteration has halved.
                 result.fallbacks += 1
@@ -256,13 +266,17 @@ class Accelerator:
     """
 
     def __init__(self, solver: SolverParameters):
-        self.kind = solver.nonlinear
+        self.kind = "anderson" if solver.nonlinear == "anderson-newton" else solver.nonlinear
         self.omega = solver.omega
         self.depth = solver.anderson_depth
         self.iterates: list[np.ndarray] = []  # G(x_k)
         self.residuals: list[np.ndarray] = []  # G(x_k) − x_k
         self.plain: np.ndarray | None = None
         self.plain_energy = np.inf
+
+    def restart(self) -> None:
+        """Forget the history (the iterate was changed by another method)."""
+        self.iterates, self.residuals, self.plain = [], [], None
 
     def step(self, state: ATState) -> None:
         """Replace the plain iterate in ``state.v`` by the accelerated one."""

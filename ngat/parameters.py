@@ -85,6 +85,10 @@ class ModelParameters:
             )
 
 
+NONLINEAR_SOLVERS = ("am", "overrelaxed", "anderson", "newton", "anderson-newton")
+"""The solvers of one load step (:func:`ngat.minimization.alternating_minimization`)."""
+
+
 @dataclass(frozen=True)
 class SolverParameters:
     """Alternating minimisation (paper, Algorithm 1).
@@ -102,10 +106,11 @@ class SolverParameters:
         Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
         minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
         ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
-        accelerated steps fall back to the plain one whenever it has lower energy; or
+        accelerated steps fall back to the plain one whenever it has lower energy;
         ``"newton"``: alternating minimisation until ‖v^n − v^{n−1}‖_∞ < ``newton_switch``,
         then a Newton step on the coupled system with an energy line search after each
-        iteration (:mod:`ngat.newton`).
+        iteration (:mod:`ngat.newton`); or ``"anderson-newton"``: the same with Anderson
+        acceleration of the iterations.
     omega
         Over-relaxation factor ω.
     anderson_depth
@@ -136,9 +141,9 @@ class SolverParameters:
             raise ParameterError(f"am_tol must be positive, got am_tol={self.am_tol}")
         if not self.am_max_iter >= 1:
             raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
-        if self.nonlinear not in ("am", "overrelaxed", "anderson", "newton"):
+        if self.nonlinear not in NONLINEAR_SOLVERS:
             raise ParameterError(
-                f"nonlinear must be am, overrelaxed, anderson or newton, got {self.nonlinear!r}"
+                f"nonlinear must be one of {', '.join(NONLINEAR_SOLVERS)}, got {self.nonlinear!r}"
             )
         if not self.newton_switch > 0:
             raise ParameterError(f"newton_switch must be positive, got {self.newton_switch}")

@@ -1,14 +1,16 @@
 """Stability where methods fail: the failure matrix of nonlinear solvers × stress cases.
 
 Question: which nonlinear solver for one load step (plain alternating minimisation ``am``, the
-paper's; ``overrelaxed``; ``anderson``) survives which stress — the rapid-growth window of
+paper's; ``overrelaxed``; ``anderson``; ``newton`` and ``anderson-newton``, which add Newton
+steps on the coupled system) survives which stress — the rapid-growth window of
 two-slits, large load increments, η → 0, an under-resolved ε, obtuse meshes with and without the
 bounded v-step, coarse and fine TOL — and at what cost?
 
 Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
 changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
-records: status (converged, not converged, failed with the error, timeout), AM iterations,
-linear solves, final total energy, min/max v, fracture time, the diagnostics and the wall time.
+records: status (converged, not converged, failed with the error, timeout and the load time
+reached), AM iterations, linear solves, Newton steps, rejected accelerated or Newton steps,
+final total energy, min/max v, fracture time, the diagnostics and the wall time.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -26,7 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ngat.parameters import NONLINEAR_SOLVERS
+
 QUICK_TIMES = np.round(np.arange(0.0, 1.61, 0.05), 10)
+LONG_TIMES = np.round(np.arange(0.0, 2.01, 0.05), 10)  # coarse meshes break late
 GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 10)
 CASES = {
     # name: (parameter changes, load times)
@@ -36,15 +41,19 @@ CASES = {
     "η=1e-3": ({"eta": 1e-3}, QUICK_TIMES),
     "η=1e-8": ({"eta": 1e-8}, QUICK_TIMES),
     "ε under-resolved (fixed h=0.25)": ({"adapt": "fixed", "maxh": 0.25}, QUICK_TIMES),
-    "TOL=1.0": ({"tol": 1.0}, QUICK_TIMES),
+    "TOL=1.0": ({"tol": 1.0}, LONG_TIMES),
     "TOL=0.05": ({"tol": 0.05, "h_floor": 0.004}, QUICK_TIMES),
     "no v bounds (obtuse bisection)": ({"bounded_v": False}, QUICK_TIMES),
 }  # fmt: skip
-METHODS = ["am", "overrelaxed", "anderson"]
+METHODS = list(NONLINEAR_SOLVERS)
 
 
-def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
-    """Run one cell and put its row on the queue (runs in a child process)."""
+def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None:
+    """Run one cell and put its row on the queue (runs in a child process).
+
+    ``progress`` (a shared double) holds the load time of the last finished step, so that a
+    cell stopped at the time limit can say how far it got.
+    """
     from ngat.driver import run
     from ngat.scene import load_scene
 
@@ -52,14 +61,22 @@ def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
     scene = load_scene("two-slits")
     parameters, _ = scene.configure(quick=True, overrides={"nonlinear": method, **changes})
     begin = time.perf_counter()
+
+    def on_step(record: dict) -> None:
+        progress.value = record["t"]
+
     try:
-        result = run(scene, parameters, times, Path(tempfile.mkdtemp()) / "run")
+        result = run(
+            scene, parameters, times, Path(tempfile.mkdtemp()) / "run", on_step=on_step
+        )
         records = result.records
         status = "converged" if all(r["converged"] for r in records) else "not converged"
         row = {
             "status": status,
             "am_iterations": sum(r["am_iterations"] for r in records),
             "linear_solves": sum(r["linear_solves"] for r in records),
+            "newton_steps": sum(r["newton_steps"] for r in records),
+            "fallbacks": sum(r["fallbacks"] for r in records),
             "total": records[-1]["total"],
             "v_min": min(r["v_min"] for r in records),
             "v_max": max(r["v_max"] for r in records),
@@ -75,12 +92,16 @@ def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
 def run_cell(method: str, case: str, limit: float) -> dict:
     """Run a cell in a child process; a cell over the time limit is recorded as a timeout."""
     queue: multiprocessing.Queue = multiprocessing.Queue()
-    process = multiprocessing.Process(target=cell, args=(method, case, queue))
+    progress = multiprocessing.Value("d", -1.0)
+    process = multiprocessing.Process(target=cell, args=(method, case, queue, progress))
     process.start()
     process.join(limit)
     if process.is_alive():
         process.kill()
-        return {"method": method, "case": case, "status": "timeout", "wall_s": limit}
+        return {
+            "method": method, "case": case, "status": "timeout", "wall_s": limit,
+            "reached_t": progress.value,
+        }  # fmt: skip
     return {"method": method, "case": case, **queue.get()}
 
 
@@ -105,6 +126,8 @@ def draw(rows: list[dict], path: Path) -> None:
             text = status if not status.startswith("failed") else "failed"
             if "linear_solves" in row:
                 text += f"\n{row['linear_solves']} solves, {row['wall_s']:.0f} s"
+            elif status == "timeout" and row.get("reached_t", -1) >= 0:
+                text += f" at t = {row['reached_t']:g}"
             ax.add_patch(plt.Rectangle((j, i), 1, 1, facecolor=face, edgecolor="white"))
             ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7)
     ax.set_xlim(0, len(methods))
@@ -121,8 +144,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/stability"))
     parser.add_argument("--limit", type=float, default=300.0, help="seconds per cell")
     parser.add_argument("--quick", action="store_true", help="two cells only")
+    parser.add_argument("--methods", nargs="+", default=METHODS, choices=METHODS)
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args()
-    cells = [(m, c) for c in CASES for m in METHODS]
+    cells = [(m, c) for c in args.cases for m in args.methods]
     if args.quick:
         cells = [("am", "Δt=0.1"), ("anderson", "Δt=0.1")]
     args.out.mkdir(parents=True, exist_ok=True)
