@@ -66,9 +66,7 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
         progress.value = record["t"]
 
     try:
-        result = run(
-            scene, parameters, times, Path(tempfile.mkdtemp()) / "run", on_step=on_step
-        )
+        result = run(scene, parameters, times, Path(tempfile.mkdtemp()) / "run", on_step=on_step)
         records = result.records
         status = "converged" if all(r["converged"] for r in records) else "not converged"
         row = {
