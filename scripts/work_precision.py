@@ -35,8 +35,9 @@ Output in ``--out`` (default ``results/work_precision``): ``work_precision.csv``
 case), ``work_precision.png`` (log–log error against wall time, one row of panels per scene,
 one panel per error measure, one curve per method, points labelled by TOL or h),
 ``summary.json`` (the 10× check), and each case's raw measures in ``runs/`` (``--reuse`` takes
-them instead of running the case again). ``--quick`` runs the scenes' quick variants at one TOL
-and one h (the tests use it).
+them instead of running the case again). ``--nonlinear am anderson-newton`` runs the adaptive
+cases once per nonlinear solver, side by side, for a before/after of the solver. ``--quick``
+runs the scenes' quick variants at one TOL and one h (the tests use it).
 """
 
 from __future__ import annotations
@@ -67,9 +68,13 @@ SURFING_WINDOW = 0.5
 
 
 def overrides(method: str, value: float) -> dict:
-    """Return the parameter changes of a case: ``tol`` (adaptive) or ``maxh`` (uniform)."""
-    if method == "adaptive":
-        return {"tol": value}
+    """Return the parameter changes of a case: ``tol`` (adaptive) or ``maxh`` (uniform).
+
+    ``method`` is ``"uniform"``, ``"adaptive"`` or ``"adaptive <nonlinear solver>"``.
+    """
+    if method.startswith("adaptive"):
+        solver = method.split()[1:]
+        return {"tol": value, **({"nonlinear": solver[0]} if solver else {})}
     return {"adapt": "fixed", "maxh": value}
 
 
@@ -178,7 +183,8 @@ def plot(rows: list[dict], path: Path) -> None:
     for i, scene in enumerate(scenes):
         for j, measure in enumerate(MEASURES):
             ax = axes[i, j]
-            for method, style in (("adaptive", "o-"), ("uniform", "s--")):
+            for method in dict.fromkeys(r["method"] for r in rows):
+                style = "o-" if method.startswith("adaptive") else "s--"
                 # A fracture time equal to the reference's is exact to the load step 0.01:
                 # drawn at 0.005.
                 floor = 0.005 if measure == "fracture_time" else 0.0
@@ -193,7 +199,7 @@ def plot(rows: list[dict], path: Path) -> None:
                 wall, err, value = zip(*sorted(pts), strict=True)
                 ax.loglog(wall, err, style, label=method)
                 for w, e, v in pts:
-                    label = f"TOL {v:g}" if method == "adaptive" else f"h {v:g}"
+                    label = f"TOL {v:g}" if method.startswith("adaptive") else f"h {v:g}"
                     ax.annotate(
                         label, (w, e), fontsize=6, xytext=(3, 3), textcoords="offset points"
                     )
@@ -223,7 +229,7 @@ def ten_times_check(rows: list[dict], scene: str = "two-slits", h: float = 0.025
         return {}
     target = uniform[0]
     better = [
-        r for r in rows if r["scene"] == scene and r["method"] == "adaptive"
+        r for r in rows if r["scene"] == scene and r["method"].startswith("adaptive")
         and r["energy_1.0"] <= target["energy_1.0"]
     ]  # fmt: skip
     if not better:
@@ -245,19 +251,29 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="quick variants, one TOL, one h")
     parser.add_argument("--scenes", nargs="+", default=SCENES, choices=SCENES)
     parser.add_argument("--tols", nargs="+", type=float, default=None)
-    parser.add_argument("--hs", nargs="+", type=float, default=None)
+    parser.add_argument("--hs", nargs="*", type=float, default=None, help="none: no uniform")
+    parser.add_argument(
+        "--nonlinear", nargs="+", default=None,
+        help="run the adaptive cases once per nonlinear solver (e.g. am anderson-newton)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=Path("results/work_precision"))
     parser.add_argument("--reuse", action="store_true", help="reuse the cases already run")
     parser.add_argument("--reference", type=Path, default=ROOT / "geometries" / "reference")
     args = parser.parse_args(argv)
     tols = args.tols or ([0.6] if args.quick else TOLS)
-    hs = {scene: args.hs or ([0.2] if args.quick else HS[scene]) for scene in args.scenes}
+    if args.hs is not None:
+        hs = {scene: args.hs for scene in args.scenes}
+    else:
+        hs = {scene: [0.2] if args.quick else HS[scene] for scene in args.scenes}
+    adaptive = [f"adaptive {s}" for s in args.nonlinear] if args.nonlinear else ["adaptive"]
     (args.out / "runs").mkdir(parents=True, exist_ok=True)
     cases = []
     for scene in args.scenes:
-        for method, values in (("adaptive", tols), ("uniform", hs[scene])):
+        methods = [(m, tols) for m in adaptive] + [("uniform", hs[scene])]
+        for method, values in methods:
             for value in values:
-                name = f"{scene}_{method}_{value:g}{'_quick' if args.quick else ''}"
+                label = method.replace(" ", "_")
+                name = f"{scene}_{label}_{value:g}{'_quick' if args.quick else ''}"
                 raw = args.out / "runs" / f"{name}.json"
                 if args.reuse and raw.exists():
                     case = json.loads(raw.read_text())
