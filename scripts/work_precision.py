@@ -269,23 +269,22 @@ def main(argv: list[str] | None = None) -> None:
     (args.out / "runs").mkdir(parents=True, exist_ok=True)
     cases = []
     for scene in args.scenes:
-        methods = [(m, tols) for m in adaptive] + [("uniform", hs[scene])]
-        for method, values in methods:
-            for value in values:
-                label = method.replace(" ", "_")
-                name = f"{scene}_{label}_{value:g}{'_quick' if args.quick else ''}"
-                raw = args.out / "runs" / f"{name}.json"
-                if args.reuse and raw.exists():
-                    case = json.loads(raw.read_text())
-                else:
-                    with ProcessPoolExecutor(max_workers=1, max_tasks_per_child=1) as pool:
-                        case = pool.submit(
-                            run_case, scene, method, value, str(args.out / "runs" / name),
-                            args.quick,
-                        ).result()  # fmt: skip
-                    raw.write_text(json.dumps(case))
-                print(f"{name}: {case['wall_s']:.1f} s", flush=True)
-                cases.append((scene, method, value, case))
+        # Solvers alternate at each TOL, so that a change in the machine's load hits both.
+        runs = [(m, tol) for tol in tols for m in adaptive] + [("uniform", h) for h in hs[scene]]
+        for method, value in runs:
+            label = method.replace(" ", "_")
+            name = f"{scene}_{label}_{value:g}{'_quick' if args.quick else ''}"
+            raw = args.out / "runs" / f"{name}.json"
+            if args.reuse and raw.exists():
+                case = json.loads(raw.read_text())
+            else:
+                with ProcessPoolExecutor(max_workers=1, max_tasks_per_child=1) as pool:
+                    case = pool.submit(
+                        run_case, scene, method, value, str(args.out / "runs" / name), args.quick
+                    ).result()
+                raw.write_text(json.dumps(case))
+            print(f"{name}: {case['wall_s']:.1f} s", flush=True)
+            cases.append((scene, method, value, case))
     rows = []
     for scene, method, value, case in cases:
         reference = json.loads((args.reference / f"{scene.replace('-', '_')}.json").read_text())
