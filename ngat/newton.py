@@ -74,28 +74,53 @@ class NewtonSolver:
         self._arrays = None
 
     def _setup(self) -> None:
-        """Build the block graph, the scatter positions and the work vectors for this mesh."""
-        arrays = self.state.arrays
-        n, el = arrays.nv, arrays.elements
-        rows = np.broadcast_to(el[:, :, None], (arrays.ne, 3, 3)).ravel()
-        cols = np.broadcast_to(el[:, None, :], (arrays.ne, 3, 3)).ravel()
-        # Blocks uu, vv, vu (row v_a, column u_b) and its transpose uv.
-        block_rows = np.concatenate([rows, rows + n, rows + n, cols])
-        block_cols = np.concatenate([cols, cols + n, cols, rows + n])
-        local_keys = block_rows * (2 * n) + block_cols
-        graph = np.unique(local_keys)
+        """Build the block graph, the scatter positions and the work vectors for this mesh.
+
+        The Hessian's graph is the P1 graph of a_j in each of the four blocks. Row i of the
+        u-block holds the P1 columns of row i, then the same shifted by n; so does row n + i.
+        Every position follows from the P1 matrix's CSR layout by arithmetic.
+        """
+        state = self.state
+        arrays, assembler = state.arrays, state.assembler
+        n, ne = arrays.nv, arrays.ne
+        _, p1_cols, p1_rowptr = state.a_matrix.CSR()
+        p1_cols = np.asarray(p1_cols, dtype=np.int64)
+        p1_rowptr = np.asarray(p1_rowptr, dtype=np.int64)
+        nnz, degree = len(p1_cols), np.diff(p1_rowptr)
+        p1_rows = np.repeat(np.arange(n), degree)
+
+        def block_position(p, v_row, v_col):
+            """Position in the block CSR of P1 entry p in the (u|v row, u|v column) block."""
+            i = p1_rows[p]
+            return v_row * 2 * nnz + 2 * p1_rowptr[i] + v_col * degree[i] + p - p1_rowptr[i]
+
+        entries = np.arange(nnz)
+        self.nnz = 4 * nnz
+        self.entry_rows = np.empty(self.nnz, dtype=np.int64)
+        self.entry_cols = np.empty(self.nnz, dtype=np.int64)
+        for v_row in (0, 1):
+            for v_col in (0, 1):
+                at = block_position(entries, v_row, v_col)
+                self.entry_rows[at] = p1_rows + v_row * n
+                self.entry_cols[at] = p1_cols + v_col * n
         self.matrix = SparseMatrixd.CreateFromCOO(
-            graph // (2 * n), graph % (2 * n), np.ones(len(graph)), 2 * n, 2 * n
+            self.entry_rows, self.entry_cols, np.ones(self.nnz), 2 * n, 2 * n
         )
-        _, csr_cols, rowptr = self.matrix.CSR()
-        csr_cols = np.asarray(csr_cols, dtype=np.int64)
-        rowptr = np.asarray(rowptr, dtype=np.int64)
-        self.entry_rows = np.repeat(np.arange(2 * n), np.diff(rowptr))
-        self.entry_cols = csr_cols
-        keys = self.entry_rows * (2 * n) + csr_cols
-        self.position = np.searchsorted(keys, local_keys)
-        self.diagonal = np.searchsorted(keys, np.arange(2 * n) * (2 * n + 1))
-        self.nnz = len(keys)
+        local = assembler.position
+        transposed = local.reshape(ne, 3, 3).transpose(0, 2, 1).ravel()
+        # The order of hessian_values: uu, vv, vu (row v_a, column u_b), uv (its transpose).
+        self.position = np.concatenate(
+            [
+                block_position(local, 0, 0),
+                block_position(local, 1, 1),
+                block_position(local, 1, 0),
+                block_position(transposed, 0, 1),
+            ]
+        )
+        diagonal = assembler.diagonal
+        self.diagonal = np.concatenate(
+            [block_position(diagonal, 0, 0), block_position(diagonal, 1, 1)]
+        )
         self.inverse = None
         self.rhs = self.matrix.CreateColVector()
         self.delta = self.matrix.CreateColVector()
@@ -150,7 +175,8 @@ class NewtonSolver:
         """
         state = self.state
         if self._arrays is not state.arrays:
-            self._setup()
+            with state.timer("assembly"):
+                self._setup()
         n = state.arrays.nv
         u, v = state.u_values.copy(), state.v_values.copy()
         upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0

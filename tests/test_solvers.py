@@ -84,6 +84,8 @@ def test_newton_gradient_and_hessian_are_those_of_the_energy():
     values, cols, rowptr = map(np.asarray, form.mat.CSR())
     theirs = sp.csr_matrix((values, cols, rowptr), (n2, n2))
     assert abs(ours - theirs).max() < 1e-12 * abs(theirs).max()
+    _, layout, _ = newton.matrix.CSR()
+    assert np.array_equal(np.asarray(layout), newton.entry_cols)
     g = gradient.FV().NumPy()
     assert np.abs(newton.gradient(u, v) - g).max() < 1e-12 * np.abs(g).max()
     state.u_values[:], state.v_values[:] = u, v
