@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from ngsolve import GridFunction
 
 from ngat.estimators import mu_estimator, nu_estimator
 from ngat.newton import NewtonSolver
@@ -205,7 +206,7 @@ def alternating_minimization(
         state.v_iter.vec.data = state.v.vec
         elements = state.arrays.ne
         _half_step(state, "u", adaptivity, result)
-        if accelerator and not accelerator.safeguard(state, elements, result):
+        if accelerator and not accelerator.safeguard(state, result):
             _half_step(state, "u", adaptivity, result)
         if monitor:
             monitor("u", state)
@@ -232,7 +233,8 @@ def alternating_minimization(
             result.reason = "converged"
             break
         if newton and change < newton_below:
-            if newton.step(state.crack_set()):
+            ceiling = accelerator.plain_energy if accelerator and accelerator.has_plain else np.inf
+            if newton.step(state.crack_set(), ceiling):
                 result.newton_steps += 1
                 result.energies.append(state.energies()["total"])
                 if accelerator:
@@ -261,8 +263,10 @@ class Accelerator:
     irreversibility) and v = 0 on CR. The v-step minimises I_j(u^n, ·) exactly, so the
     accelerated v cannot be judged before the next u-step: :meth:`safeguard` compares
     I_j(u^{n+1}, v_acc) with I_j(u^n, G(v)) and, if the energy went up, restores the plain
-    iterate (the caller repeats the u-step) and clears the history. The sequence of accepted
-    energies therefore never increases, as for plain alternating minimisation.
+    iterate (the caller repeats the u-step) and clears the history. The plain iterate is kept
+    in a GridFunction that ``mesh.Refine()`` prolongates, so the comparison also holds when the
+    u-step refined the mesh (bisection with the vertex rule does not raise I_j). The sequence of
+    accepted energies therefore never increases, as for plain alternating minimisation.
     """
 
     def __init__(self, solver: SolverParameters):
@@ -271,21 +275,25 @@ class Accelerator:
         self.depth = solver.anderson_depth
         self.iterates: list[np.ndarray] = []  # G(x_k)
         self.residuals: list[np.ndarray] = []  # G(x_k) − x_k
-        self.plain: np.ndarray | None = None
+        self.plain: GridFunction | None = None
+        self.has_plain = False
         self.plain_energy = np.inf
 
     def restart(self) -> None:
         """Forget the history (the iterate was changed by another method)."""
-        self.iterates, self.residuals, self.plain = [], [], None
+        self.iterates, self.residuals, self.has_plain = [], [], False
 
     def step(self, state: ATState) -> None:
         """Replace the plain iterate in ``state.v`` by the accelerated one."""
         v = state.v_values
         v_old = state.v_iter.vec.FV().NumPy()
         if len(v_old) != len(v) or (self.iterates and len(self.iterates[0]) != len(v)):
-            self.iterates, self.residuals, self.plain = [], [], None
+            self.restart()
             return
-        self.plain = v.copy()
+        if self.plain is None:
+            self.plain = GridFunction(state.fes, autoupdate=True)
+        self.plain.vec.data = state.v.vec
+        self.has_plain = True
         self.plain_energy = state.energies()["total"]
         if self.kind == "overrelaxed":
             candidate = v_old + self.omega * (v - v_old)
@@ -305,17 +313,15 @@ class Accelerator:
         candidate[state.crack_set()] = 0.0
         v[:] = candidate
 
-    def safeguard(self, state: ATState, elements: int, result: StepResult) -> bool:
+    def safeguard(self, state: ATState, result: StepResult) -> bool:
         """After the u-step: keep the accelerated v if I_j did not increase; else restore.
 
         Returns ``False`` when the plain iterate was restored (the u-step must be repeated).
         """
-        if self.plain is None or elements != state.arrays.ne or len(self.plain) != state.arrays.nv:
+        if not self.has_plain or state.energies()["total"] <= self.plain_energy:
             return True
-        if state.energies()["total"] <= self.plain_energy:
-            return True
-        state.v_values[:] = self.plain
-        state.v_iter.vec.FV().NumPy()[:] = self.plain
-        self.iterates, self.residuals, self.plain = [], [], None
+        state.v.vec.data = self.plain.vec
+        state.v_iter.vec.data = self.plain.vec
+        self.restart()
         result.fallbacks += 1
         return False

@@ -159,13 +159,16 @@ class NewtonSolver:
         local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
         return np.bincount(self.position, weights=local, minlength=self.nnz)
 
-    def step(self, crack: np.ndarray) -> bool:
+    def step(self, crack: np.ndarray, ceiling: float = np.inf) -> bool:
         """Try one Newton step from the state's (u, v); return whether it was accepted.
 
         Parameters
         ----------
         crack
             Boolean DOF mask of CR(t_k), where v stays 0.
+        ceiling
+            The step is accepted only if I_j ends at or below this value as well (an
+            accelerated iterate may lie above the last plain iterate's energy).
 
         Returns
         -------
@@ -210,7 +213,7 @@ class NewtonSolver:
             v_trial = np.clip(v + scale * delta[n:], 0.0, upper)
             v_trial[crack] = 0.0
             energy = lumped_energies(state.arrays, state.model, u_trial, v_trial)["total"]
-            if energy <= start + self.armijo * scale * slope:
+            if energy <= min(start + self.armijo * scale * slope, ceiling):
                 state.u_values[:] = u_trial
                 state.v_values[:] = v_trial
                 return True
