@@ -128,7 +128,7 @@ class SolverParameters:
     am_tol: float = 1e-3
     am_max_iter: int = 1000
     max_cg: int = 0
-    nonlinear: str = "anderson-newton"
+    nonlinear: str = "newton"
     omega: float = 1.5
     anderson_depth: int = 5
     newton_switch: float = 0.1
