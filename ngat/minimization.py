@@ -62,6 +62,12 @@ class StepResult:
         Accelerated iterates rejected by the energy safeguard.
     linear_solves
         Linear systems solved during the step.
+    cg_iterations
+        CG iterations of the step's solves (``linear_solver="cg-h1amg"``; 0 with ``direct``).
+    cg_max_iterations
+        Most CG iterations of one solve in the step.
+    cg_not_converged
+        Solves of the step that stopped at the CG iteration cap above the tolerance.
     reason
         Why the iteration stopped: ``converged`` or ``iteration limit``.
     """
@@ -75,6 +81,9 @@ class StepResult:
     energy_increases: int = 0
     fallbacks: int = 0
     linear_solves: int = 0
+    cg_iterations: int = 0
+    cg_max_iterations: int = 0
+    cg_not_converged: int = 0
     reason: str = ""
 
 
@@ -178,6 +187,7 @@ def alternating_minimization(
     """
     result = StepResult()
     solves_before = state.linear_solves
+    cg_before = (len(state.cg_iterations), state.cg_not_converged)
     state.v_values[state.crack_set()] = 0.0
     accelerator = Accelerator(solver) if solver.nonlinear != "am" else None
     while result.iterations < solver.am_max_iter:
@@ -219,6 +229,10 @@ def alternating_minimization(
             result.change,
         )
     result.linear_solves = state.linear_solves - solves_before
+    cg_counts = state.cg_iterations[cg_before[0] :]
+    result.cg_iterations = sum(cg_counts)
+    result.cg_max_iterations = max(cg_counts, default=0)
+    result.cg_not_converged = state.cg_not_converged - cg_before[1]
     return result
 
 

@@ -3,12 +3,14 @@
 Question: which nonlinear solver for one load step (plain alternating minimisation ``am``, the
 paper's; ``overrelaxed``; ``anderson``) survives which stress — the rapid-growth window of
 two-slits, large load increments, η → 0, an under-resolved ε, obtuse meshes with and without the
-bounded v-step, coarse and fine TOL — and at what cost?
+bounded v-step, coarse and fine TOL — and at what cost? And how does the iterative linear solver
+(CG with NGSolve's h1amg, ``linear_solver=cg-h1amg``) degrade against the direct one as η → 0?
 
 Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
 changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
 records: status (converged, not converged, failed with the error, timeout), AM iterations,
-linear solves, final total energy, min/max v, fracture time, the diagnostics and the wall time.
+linear solves, CG iterations (total and most per solve; 0 with the direct solver), final total
+energy, min/max v, fracture time, the diagnostics, the wall time and the time in linear solves.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -39,6 +41,9 @@ CASES = {
     "TOL=1.0": ({"tol": 1.0}, QUICK_TIMES),
     "TOL=0.05": ({"tol": 0.05, "h_floor": 0.004}, QUICK_TIMES),
     "no v bounds (obtuse bisection)": ({"bounded_v": False}, QUICK_TIMES),
+    "CG+h1amg η=1e-3": ({"linear_solver": "cg-h1amg", "eta": 1e-3}, QUICK_TIMES),
+    "CG+h1amg η=1e-5": ({"linear_solver": "cg-h1amg"}, QUICK_TIMES),
+    "CG+h1amg η=1e-8": ({"linear_solver": "cg-h1amg", "eta": 1e-8}, QUICK_TIMES),
 }  # fmt: skip
 METHODS = ["am", "overrelaxed", "anderson"]
 
@@ -60,11 +65,14 @@ def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
             "status": status,
             "am_iterations": sum(r["am_iterations"] for r in records),
             "linear_solves": sum(r["linear_solves"] for r in records),
+            "cg_iterations": sum(r["cg_iterations"] for r in records),
+            "cg_max_iterations": max(r["cg_max_iterations"] for r in records),
             "total": records[-1]["total"],
             "v_min": min(r["v_min"] for r in records),
             "v_max": max(r["v_max"] for r in records),
             "fracture_time": result.summary.get("fracture_time", ""),
             "diagnostics": " ".join(sorted({p["kind"] for p in result.summary["diagnostics"]})),
+            "solve_s": result.summary["timing"].get("solve", 0.0),
         }
     except Exception as error:  # noqa: BLE001 - a failed cell is a result of the study
         row = {"status": f"failed: {type(error).__name__}: {error}"}
@@ -105,6 +113,8 @@ def draw(rows: list[dict], path: Path) -> None:
             text = status if not status.startswith("failed") else "failed"
             if "linear_solves" in row:
                 text += f"\n{row['linear_solves']} solves, {row['wall_s']:.0f} s"
+            if row.get("cg_iterations"):
+                text += f"\n{row['cg_iterations']} CG its (≤ {row['cg_max_iterations']}/solve)"
             ax.add_patch(plt.Rectangle((j, i), 1, 1, facecolor=face, edgecolor="white"))
             ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7)
     ax.set_xlim(0, len(methods))
