@@ -1,16 +1,16 @@
 """Detection of numerical trouble in a run, named in the log and the run summary.
 
 Each load step is checked for: the alternating minimisation stopping at its iteration limit
-(``not-converged``), NaN or Inf (``nan``, always an error), v outside [0, 1] beyond round-off
-(``v-out-of-bounds``: Proposition 3 needs Hypothesis A, which obtuse elements violate, unless the
-v-step is bounded), an iteration that increased I_j although every half-step minimises it
-(``energy-increase``), and ε under-resolved by the mesh where the crack is
-(``eps-under-resolved``: the largest element meeting the crack {v < 0.1}, or before a crack
-exists the most damaged vertex, is at least ε wide, so the profile 1 − exp(−d/(2ε)) is not
-resolved and the crack costs ≈ 1 + h/(4ε) times G_c).
-Depending on ``on_problem`` each is a warning (logged, listed in ``summary.json`` under
-``diagnostics`` and in the step's ``warnings`` column) or an error that stops the run, with the
-results written so far kept.
+(``not-converged``), an iterative linear solve stopping at its iteration cap above its tolerance
+(``linear-not-converged``, ``linear_solver="cg-h1amg"``), NaN or Inf (``nan``, always an
+error), v outside [0, 1] beyond round-off (``v-out-of-bounds``: Proposition 3 needs
+Hypothesis A, which obtuse elements violate, unless the v-step is bounded), an iteration that
+increased I_j although every half-step minimises it (``energy-increase``), and ε under-resolved
+by the mesh (``eps-under-resolved``: the largest element meeting the crack {v < 0.1}, or before
+a crack exists the most damaged vertex, is at least ε wide, so the profile 1 − exp(−d/(2ε)) is
+not resolved and the crack costs ≈ 1 + h/(4ε) times G_c). Depending on ``on_problem`` each is a
+warning (logged, listed in ``summary.json`` under ``diagnostics`` and in the step's
+``warnings`` column) or an error that stops the run, with the results written so far kept.
 """
 
 from __future__ import annotations
@@ -105,6 +105,12 @@ class Diagnostics:
                 "not-converged",
                 not result.converged,
                 f"stopped at the iteration limit with ‖Δv‖∞ = {result.change:.3g}",
+            ),
+            (
+                "linear-not-converged",
+                result.cg_not_converged > 0,
+                f"{result.cg_not_converged} CG solve(s) stopped at the iteration cap above the "
+                "tolerance (the run continued with their last iterates): use linear_solver=direct",
             ),
             (
                 "v-out-of-bounds",

@@ -151,7 +151,7 @@ def run(
         solver = parameters.solver
         state = ATState(
             mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
-            solver.bounded_v,
+            solver.bounded_v, solver.linear_solver,
         )  # fmt: skip
         if checkpoint is not None:
             restore_state(state, checkpoint)
@@ -182,6 +182,8 @@ def run(
                 cracked_vertices=int(crack.sum()),
                 v_bound_active=state.bound_active,
                 linear_solves=step.linear_solves,
+                cg_iterations=step.cg_iterations,
+                cg_max_iterations=step.cg_max_iterations,
                 fallbacks=step.fallbacks,
                 newton_steps=step.newton_steps,
             )

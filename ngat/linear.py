@@ -1,4 +1,4 @@
-"""Linear solves of the half-steps: sparse Cholesky, refreshed only when it stops paying.
+"""Linear solves of the half-steps: sparse Cholesky, or CG with NGSolve's h1amg preconditioner.
 
 Between two alternating-minimisation iterations the matrices of a_j and b_j change only where v
 or ∇u changed, and less and less as the iteration converges. :class:`LaggedCholesky` therefore
@@ -6,16 +6,26 @@ keeps the last numeric factorisation as a preconditioner for conjugate gradients
 matrix; when CG needs more than ``max_cg`` iterations, the factorisation is refreshed with
 ``Inverse.Update()`` (same graph and free DOFs: the ordering and symbolic analysis are reused)
 and the system is solved directly. With ``max_cg = 0`` every solve refactorises.
+
+:class:`AMGConjugateGradient` is the iterative alternative (``linear_solver="cg-h1amg"``): CG
+preconditioned by NGSolve's algebraic multigrid ``h1amg``, rebuilt for every new matrix. The
+h1amg preconditioner coarsens by weights computed from the element matrices, which it only sees
+during ``BilinearForm.Assemble()``, and it takes its free DOFs from the form's space; so each
+refresh writes the free DOFs into a P1 space reserved for the solver and assembles the form.
 """
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
-from ngsolve import BitArray
+from ngsolve import BilinearForm, BitArray, Preconditioner
 from ngsolve.krylovspace import CGSolver
 from ngsolve.la import BaseVector, SparseMatrixd
 
-__all__ = ["LaggedCholesky"]
+__all__ = ["LaggedCholesky", "AMGConjugateGradient"]
+
+log = logging.getLogger(__name__)
 
 
 class LaggedCholesky:
@@ -64,3 +74,87 @@ class LaggedCholesky:
             self.factorizations += 1
             self.stale = False
         out.data = self.inverse * rhs
+
+
+class AMGConjugateGradient:
+    """Solve A x = b on the free DOFs by CG preconditioned with NGSolve's ``h1amg``.
+
+    CG runs on ``matrix`` (the values the caller writes with :class:`ngat.forms.LumpedAssembler`,
+    the same operator as the direct solver's); the preconditioner is built on the NGSolve
+    assembly of ``form``, which equals it to round-off (``tests/test_forms.py``). A solve that
+    stops at ``maxiter`` before reducing the preconditioned residual by ``tol`` keeps its last
+    iterate, logs a warning and sets :attr:`converged` to ``False``; the state counts such
+    solves and the run's diagnostics report them as ``linear-not-converged``
+    (:mod:`ngat.diagnostics`).
+
+    Parameters
+    ----------
+    form
+        Bilinear form of A on a P1 space reserved for this solver: its free DOFs are
+        overwritten at every refresh. Its coefficients must follow the caller's fields, so
+        that ``form.Assemble()`` gives the current values of A.
+    matrix
+        Sparse matrix of A, values rewritten by the caller between solves.
+    free
+        Boolean mask of the free DOFs.
+    tol
+        Reduction of the preconditioned residual norm √(rᵀPr) required from CG.
+    maxiter
+        CG iteration cap per solve.
+
+    Attributes
+    ----------
+    iterations : int
+        CG iterations of the last solve.
+    converged : bool
+        Whether the last solve reached the tolerance.
+    """
+
+    def __init__(
+        self,
+        form: BilinearForm,
+        matrix: SparseMatrixd,
+        free: np.ndarray,
+        tol: float = 1e-10,
+        maxiter: int = 2000,
+    ):
+        self.form = form
+        self.matrix = matrix
+        self.preconditioner = Preconditioner(form, "h1amg")
+        self.free = free.copy()
+        self.tol = tol
+        self.maxiter = maxiter
+        self.stale = True
+        self.iterations = 0
+        self.converged = True
+
+    def values_changed(self, free: np.ndarray | None = None) -> None:
+        """Note that the caller rewrote the matrix values (and, if given, the free DOFs)."""
+        if free is not None:
+            self.free = free.copy()
+        self.stale = True
+
+    def _rebuild(self) -> None:
+        """Write the free DOFs into the form's space and assemble: h1amg is built anew."""
+        freedofs = self.form.space.FreeDofs()
+        freedofs.Set()
+        freedofs &= BitArray(self.free)
+        self.form.Assemble()
+        self.stale = False
+
+    def solve(self, rhs: BaseVector, out: BaseVector) -> None:
+        """Set ``out`` to A⁻¹ rhs on the free DOFs (0 elsewhere), starting CG from 0."""
+        if self.stale:
+            self._rebuild()
+        # NGSolve's CGSolver counts the initial residual as an iteration.
+        cg = CGSolver(self.matrix, self.preconditioner, tol=self.tol, maxiter=self.maxiter + 1)
+        cg.Solve(rhs, out)
+        first, last = cg.residuals[0], cg.residuals[-1]
+        self.iterations = len(cg.residuals) - 1
+        self.converged = last <= self.tol * first
+        if not self.converged:
+            log.warning(
+                "CG with h1amg stopped at %d iterations with relative residual %.3g > %.0e "
+                "(%d free DOFs)",
+                self.iterations, last / first, self.tol, int(self.free.sum()),
+            )  # fmt: skip

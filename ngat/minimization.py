@@ -76,6 +76,12 @@ class StepResult:
         Accepted Newton steps (``nonlinear="newton"``).
     linear_solves
         Linear systems solved during the step.
+    cg_iterations
+        CG iterations of the step's solves (``linear_solver="cg-h1amg"``; 0 with ``direct``).
+    cg_max_iterations
+        Most CG iterations of one solve in the step.
+    cg_not_converged
+        Solves of the step that stopped at the CG iteration cap above the tolerance.
     reason
         Why the iteration stopped: ``converged`` or ``iteration limit``.
     """
@@ -90,6 +96,9 @@ class StepResult:
     fallbacks: int = 0
     newton_steps: int = 0
     linear_solves: int = 0
+    cg_iterations: int = 0
+    cg_max_iterations: int = 0
+    cg_not_converged: int = 0
     reason: str = ""
 
 
@@ -193,6 +202,7 @@ def alternating_minimization(
     """
     result = StepResult()
     solves_before = state.linear_solves
+    cg_before = (len(state.cg_iterations), state.cg_not_converged)
     state.v_values[state.crack_set()] = 0.0
     accelerator = None
     if solver.nonlinear in ("overrelaxed", "anderson", "anderson-newton"):
@@ -251,6 +261,10 @@ def alternating_minimization(
             result.change,
         )
     result.linear_solves = state.linear_solves - solves_before
+    cg_counts = state.cg_iterations[cg_before[0] :]
+    result.cg_iterations = sum(cg_counts)
+    result.cg_max_iterations = max(cg_counts, default=0)
+    result.cg_not_converged = state.cg_not_converged - cg_before[1]
     return result
 
 

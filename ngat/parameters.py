@@ -102,6 +102,13 @@ class SolverParameters:
     max_cg
         CG iterations accepted with a stale Cholesky factor as preconditioner before the
         factor is refreshed (:class:`ngat.linear.LaggedCholesky`); 0: refactorise every solve.
+    linear_solver
+        Linear solver of both half-steps (:mod:`ngat.linear`): ``"direct"`` sparse Cholesky
+        (with ``max_cg`` above), ``"cg-h1amg"`` conjugate gradients preconditioned by NGSolve's
+        algebraic multigrid ``h1amg``, rebuilt for every matrix, to a relative residual of 1e−10
+        within 2000 iterations (a solve that stops at the cap is reported as
+        ``linear-not-converged``, :mod:`ngat.diagnostics`). Newton steps solve their coupled
+        system directly in either case.
     nonlinear
         Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
         minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
@@ -128,6 +135,7 @@ class SolverParameters:
     am_tol: float = 1e-3
     am_max_iter: int = 1000
     max_cg: int = 0
+    linear_solver: str = "direct"
     nonlinear: str = "newton"
     omega: float = 1.5
     anderson_depth: int = 5
@@ -141,6 +149,10 @@ class SolverParameters:
             raise ParameterError(f"am_tol must be positive, got am_tol={self.am_tol}")
         if not self.am_max_iter >= 1:
             raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
+        if self.linear_solver not in ("direct", "cg-h1amg"):
+            raise ParameterError(
+                f"linear_solver must be direct or cg-h1amg, got {self.linear_solver!r}"
+            )
         if self.nonlinear not in NONLINEAR_SOLVERS:
             raise ParameterError(
                 f"nonlinear must be one of {', '.join(NONLINEAR_SOLVERS)}, got {self.nonlinear!r}"

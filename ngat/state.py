@@ -2,10 +2,11 @@
 
 :class:`ATState` owns the mesh, the P1 space and the GridFunctions (all ``autoupdate=True``, so
 ``mesh.Refine()`` prolongates them exactly), the Dirichlet and crack DOF masks and the two
-sparse Cholesky factorisations. The u-step solves a_j(v; u, φ) = 0 with u = g(t_k) on Ω_D, the
-v-step solves b_j(u; v, ψ) = 0 with v = 0 on CR(t_k) (paper, Algorithm 1, steps 2.1 and 2.2).
-Per mesh, the matrix graph is built once; per solve only the values are rewritten and the
-factorisation is refreshed with ``Inverse.Update()``, which keeps the symbolic analysis.
+linear solvers. The u-step solves a_j(v; u, φ) = 0 with u = g(t_k) on Ω_D, the v-step solves
+b_j(u; v, ψ) = 0 with v = 0 on CR(t_k) (paper, Algorithm 1, steps 2.1 and 2.2). Per mesh, the
+matrix graph is built once; per solve only the values are rewritten and the sparse Cholesky
+factorisation is refreshed with ``Inverse.Update()``, which keeps the symbolic analysis, or, with
+``linear_solver="cg-h1amg"``, the h1amg preconditioner is rebuilt (:mod:`ngat.linear`).
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import numpy as np
 from ngsolve import H1, TRIG, GridFunction, IntegrationRule, Parameter
 
 from ngat.estimators import EdgeTopology
-from ngat.forms import LumpedAssembler, MeshArrays, a_form
-from ngat.linear import LaggedCholesky
+from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
+from ngat.linear import AMGConjugateGradient, LaggedCholesky
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
 
@@ -79,6 +80,18 @@ class ATState:
     bounded_v
         Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`solve_v`); ``False`` solves the
         unconstrained linear system only (the paper's v-step, exact under Hypothesis A).
+    linear_solver
+        ``"direct"``: sparse Cholesky (:class:`ngat.linear.LaggedCholesky`); ``"cg-h1amg"``:
+        CG with NGSolve's h1amg preconditioner (:class:`ngat.linear.AMGConjugateGradient`).
+
+    Attributes
+    ----------
+    linear_solves : int
+        Linear systems solved so far.
+    cg_iterations : list of int
+        CG iterations of every ``cg-h1amg`` solve so far.
+    cg_not_converged : int
+        ``cg-h1amg`` solves that stopped at the iteration cap above the tolerance.
     """
 
     def __init__(
@@ -90,6 +103,7 @@ class ATState:
         timer: PhaseTimer | None = None,
         max_cg: int = 0,
         bounded_v: bool = True,
+        linear_solver: str = "direct",
     ):
         if not loads:
             raise SceneError("the scene has no Dirichlet region: give at least one load")
@@ -105,7 +119,10 @@ class ATState:
         self.timer = timer or PhaseTimer()
         self.max_cg = max_cg
         self.bounded_v = bounded_v
+        self.linear_solver = linear_solver
         self.linear_solves = 0
+        self.cg_iterations: list[int] = []
+        self.cg_not_converged = 0
         self.t = Parameter(0.0)
         self.loads = {name: g(self.t) for name, g in loads.items()}
         self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
@@ -152,8 +169,8 @@ class ATState:
                 )
                 self.initial_crack = np.array(self.fes.GetDofs(region), dtype=bool)
             self._edges = None
-            self._a_solver: LaggedCholesky | None = None
-            self._b_solver: LaggedCholesky | None = None
+            self._a_solver: LaggedCholesky | AMGConjugateGradient | None = None
+            self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
             self._residual = self.a_matrix.CreateColVector()
             self._correction = self.a_matrix.CreateColVector()
             self.bound_active = 0
@@ -233,13 +250,9 @@ class ATState:
                 self.v_values, self.model.eta
             )
         with self.timer("solve"):
-            if self._a_solver is None:
-                self._a_solver = LaggedCholesky(self.a_matrix, ~self.dirichlet, self.max_cg)
-            else:
-                self._a_solver.values_changed()
+            self._a_solver = self._refreshed(self._a_solver, "u", ~self.dirichlet)
             self._residual.data = -1 * (self.a_matrix * self.u.vec)
-            self._a_solver.solve(self._residual, self._correction)
-            self.linear_solves += 1
+            self._solve(self._a_solver)
             self.u.vec.data += self._correction
 
     def solve_v(self, crack: np.ndarray) -> None:
@@ -267,10 +280,7 @@ class ATState:
             self.v_values[crack] = 0.0
         with self.timer("solve"):
             free = ~crack
-            if self._b_solver is None or not np.array_equal(free, self._b_solver.free):
-                self._b_solver = LaggedCholesky(self.b_matrix, free, self.max_cg)
-            else:
-                self._b_solver.values_changed()
+            self._b_solver = self._refreshed(self._b_solver, "v", free)
             self._v_correction(self._b_solver)
             if self.model.irreversibility == "pointwise":
                 upper = self.v_prev.vec.FV().NumPy().copy()
@@ -278,12 +288,45 @@ class ATState:
             elif self.bounded_v:
                 self.bound_active = self._enforce_bounds(free, 1.0)
 
-    def _v_correction(self, solver: LaggedCholesky) -> None:
+    def _refreshed(
+        self, solver: LaggedCholesky | AMGConjugateGradient | None, stage: str, free: np.ndarray
+    ) -> LaggedCholesky | AMGConjugateGradient:
+        """Return a solver of the ``stage``'s matrix (``"u"``: a_j, ``"v"``: b_j) on ``free``.
+
+        Call after rewriting the matrix values. A Cholesky factorisation is kept while the free
+        DOFs stay the same; the CG solver keeps its form and preconditioner per mesh.
+        """
+        matrix = self.a_matrix if stage == "u" else self.b_matrix
+        if self.linear_solver == "cg-h1amg":
+            if solver is None:
+                # A P1 space of its own: the solver overwrites its free DOFs.
+                space = H1(self.mesh, order=1, autoupdate=False)
+                form = (
+                    a_form(space, self.v, self.model.eta)
+                    if stage == "u"
+                    else b_form(space, self.u, self.model.eps)
+                )
+                return AMGConjugateGradient(form, matrix, free)
+            solver.values_changed(free)
+            return solver
+        if solver is None or not np.array_equal(free, solver.free):
+            return LaggedCholesky(matrix, free, self.max_cg)
+        solver.values_changed()
+        return solver
+
+    def _solve(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
+        """Set the correction to the solution of the system with the residual as right side."""
+        solver.solve(self._residual, self._correction)
+        self.linear_solves += 1
+        if isinstance(solver, AMGConjugateGradient):
+            self.cg_iterations.append(solver.iterations)
+            self.cg_not_converged += not solver.converged
+
+    def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
         """Add the solution of B δ = αm − B v on the solver's free DOFs to v."""
         self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
         self._residual.data -= self.b_matrix * self.v.vec
-        solver.solve(self._residual, self._correction)
-        self.linear_solves += 1
+        self._solve(solver)
         self.v.vec.data += self._correction
 
     def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
@@ -297,7 +340,12 @@ class ATState:
         for _ in range(max_sweeps):
             v[low] = 0.0
             v[high] = upper[high] if np.ndim(upper) else upper
-            self._v_correction(LaggedCholesky(self.b_matrix, free & ~low & ~high, 0))
+            inactive = free & ~low & ~high
+            if self.linear_solver == "cg-h1amg":
+                self._b_solver = self._refreshed(self._b_solver, "v", inactive)
+                self._v_correction(self._b_solver)
+            else:
+                self._v_correction(LaggedCholesky(self.b_matrix, inactive, 0))
             self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
             self._residual.data -= self.b_matrix * self.v.vec
             gradient = -self._residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
@@ -354,8 +402,11 @@ class ATState:
 
         With ``max_cg > 0`` a factorisation outlives its load step; a resumed run rebuilds it
         from these values to repeat the uninterrupted run exactly (:mod:`ngat.checkpoint`).
+        The ``cg-h1amg`` solver keeps nothing between solves but its per-mesh form.
         """
         saved = {}
+        if self.linear_solver != "direct":
+            return saved
         if self._a_solver is not None:
             saved["a_factored"] = self._a_solver.factored_values
         if self._b_solver is not None:

@@ -4,13 +4,15 @@ Question: which nonlinear solver for one load step (plain alternating minimisati
 paper's; ``overrelaxed``; ``anderson``; ``newton`` and ``anderson-newton``, which add Newton
 steps on the coupled system) survives which stress — the rapid-growth window of
 two-slits, large load increments, η → 0, an under-resolved ε, obtuse meshes with and without the
-bounded v-step, coarse and fine TOL — and at what cost?
+bounded v-step, coarse and fine TOL — and at what cost? And how does the iterative linear solver
+(CG with NGSolve's h1amg, ``linear_solver=cg-h1amg``) degrade against the direct one as η → 0?
 
 Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
 changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
 records: status (converged, not converged, failed with the error, timeout and the load time
-reached), AM iterations, linear solves, Newton steps, rejected accelerated or Newton steps,
-final total energy, min/max v, fracture time, the diagnostics and the wall time.
+reached), AM iterations, linear solves, Newton steps, rejected accelerated or Newton steps, CG
+iterations (total and most per solve; 0 with the direct solver), final total energy, min/max v,
+fracture time, the diagnostics, the wall time and the time in linear solves.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -45,6 +47,9 @@ CASES = {
     "TOL=0.15": ({"tol": 0.15}, QUICK_TIMES),
     "TOL=0.05": ({"tol": 0.05}, QUICK_TIMES),
     "no v bounds (obtuse bisection)": ({"bounded_v": False}, QUICK_TIMES),
+    "CG+h1amg η=1e-3": ({"linear_solver": "cg-h1amg", "eta": 1e-3}, QUICK_TIMES),
+    "CG+h1amg η=1e-5": ({"linear_solver": "cg-h1amg"}, QUICK_TIMES),
+    "CG+h1amg η=1e-8": ({"linear_solver": "cg-h1amg", "eta": 1e-8}, QUICK_TIMES),
 }  # fmt: skip
 METHODS = list(NONLINEAR_SOLVERS)
 
@@ -76,11 +81,14 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
             "linear_solves": sum(r["linear_solves"] for r in records),
             "newton_steps": sum(r["newton_steps"] for r in records),
             "fallbacks": sum(r["fallbacks"] for r in records),
+            "cg_iterations": sum(r["cg_iterations"] for r in records),
+            "cg_max_iterations": max(r["cg_max_iterations"] for r in records),
             "total": records[-1]["total"],
             "v_min": min(r["v_min"] for r in records),
             "v_max": max(r["v_max"] for r in records),
             "fracture_time": result.summary.get("fracture_time", ""),
             "diagnostics": " ".join(sorted({p["kind"] for p in result.summary["diagnostics"]})),
+            "solve_s": result.summary["timing"].get("solve", 0.0),
         }
     except Exception as error:  # noqa: BLE001 - a failed cell is a result of the study
         row = {"status": f"failed: {type(error).__name__}: {error}"}
@@ -140,6 +148,8 @@ def draw(rows: list[dict], path: Path) -> None:
                 text += f"\n{row['linear_solves']} solves, {row['wall_s']:.0f} s"
             elif status == "timeout" and row.get("reached_t", -1) >= 0:
                 text += f" at t = {row['reached_t']:g}"
+            if row.get("cg_iterations"):
+                text += f"\n{row['cg_iterations']} CG its (≤ {row['cg_max_iterations']}/solve)"
             ax.add_patch(plt.Rectangle((j, i), 1, 1, facecolor=face, edgecolor="white"))
             ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7)
     ax.set_xlim(0, len(methods))

@@ -1,0 +1,102 @@
+"""Linear solvers of the half-steps (issue 6): CG with h1amg against sparse Cholesky.
+
+Both solve the same lumped systems; CG to a relative residual of 1e−10, so the alternating
+minimisation must end at the same (u, v), also when the bounded v-step's active set runs and
+when the mesh is refined between solves.
+"""
+
+import logging
+
+import numpy as np
+import pytest
+
+from ngat.diagnostics import Diagnostics
+from ngat.driver import run
+from ngat.linear import AMGConjugateGradient
+from ngat.minimization import StepResult
+from ngat.parameters import ParameterError, Parameters
+from ngat.scene import load_scene
+
+SOLVERS = ("direct", "cg-h1amg")
+
+
+def _runs(tmp_path_factory, overrides, times):
+    scene = load_scene("two-slits")
+    results = {}
+    for solver in SOLVERS:
+        parameters, _ = scene.configure(
+            overrides={
+                "eps": 0.2,
+                "am_tol": 1e-6,
+                "linear_solver": solver,
+                "nonlinear": "am",
+                **overrides,
+            }  # the half-steps' solves only: Newton's coupled solve is always direct
+        )
+        results[solver] = run(scene, parameters, times, tmp_path_factory.mktemp(solver))
+    return results
+
+
+@pytest.fixture(scope="module")
+def bounded(tmp_path_factory):
+    """Fixed mesh, pointwise irreversibility: the v-step's active set runs at t = 1.4."""
+    overrides = {"adapt": "fixed", "maxh": 0.2, "irreversibility": "pointwise"}
+    return _runs(tmp_path_factory, overrides, np.array([0.0, 1.3, 1.4]))
+
+
+@pytest.fixture(scope="module")
+def adaptive(tmp_path_factory):
+    """Algorithm 2: the mesh is refined between solves."""
+    return _runs(tmp_path_factory, {"tol": 0.5}, np.array([0.0, 1.0]))
+
+
+def _relative_difference(results, field):
+    direct = getattr(results["direct"].state, field)
+    iterative = getattr(results["cg-h1amg"].state, field)
+    return np.linalg.norm(iterative - direct) / np.linalg.norm(direct)
+
+
+@pytest.mark.parametrize("field", ["u_values", "v_values"])
+def test_cg_h1amg_gives_the_direct_solution_with_active_bounds(bounded, field):
+    assert bounded["direct"].records[-1]["v_bound_active"] > 0, "the active set should run"
+    assert bounded["cg-h1amg"].records[-1]["v_bound_active"] > 0
+    assert _relative_difference(bounded, field) < 1e-6
+
+
+@pytest.mark.parametrize("field", ["u_values", "v_values"])
+def test_cg_h1amg_gives_the_direct_solution_on_refined_meshes(adaptive, field):
+    direct, iterative = adaptive["direct"].records[-1], adaptive["cg-h1amg"].records[-1]
+    assert direct["refinements"] > 0
+    assert iterative["elements"] == direct["elements"]
+    assert _relative_difference(adaptive, field) < 1e-6
+
+
+def test_cg_iterations_are_recorded(bounded):
+    for record in bounded["cg-h1amg"].records:
+        assert record["cg_iterations"] >= record["linear_solves"] > 0
+        assert 0 < record["cg_max_iterations"] < 100
+        assert "linear-not-converged" not in record["warnings"]
+    assert all(r["cg_iterations"] == 0 for r in bounded["direct"].records)
+    state = bounded["cg-h1amg"].state
+    assert len(state.cg_iterations) == state.linear_solves
+    assert state.cg_not_converged == 0
+
+
+def test_invalid_linear_solver_is_named():
+    with pytest.raises(ParameterError, match="linear_solver.*'gmres'"):
+        Parameters().replace(linear_solver="gmres")
+
+
+def test_cg_stopped_at_its_cap_is_reported(bounded, caplog):
+    state = bounded["cg-h1amg"].state
+    state.solve_u()
+    solver = AMGConjugateGradient(state._a_solver.form, state.a_matrix, ~state.dirichlet, maxiter=2)
+    state._residual.data = -1 * (state.a_matrix * state.u.vec)
+    state._residual.FV().NumPy()[:] += 1.0  # a right-hand side CG cannot meet in 2 iterations
+    with caplog.at_level(logging.WARNING, logger="ngat.linear"):
+        solver.solve(state._residual, state._correction)
+    assert not solver.converged and solver.iterations == 2
+    assert "CG with h1amg stopped at 2 iterations" in caplog.text
+    diagnostics = Diagnostics("warn")
+    found = diagnostics.check_step(state, StepResult(converged=True, cg_not_converged=1), 0.2, 0, 1)
+    assert "linear-not-converged" in found
