@@ -108,7 +108,7 @@ class ATState:
             # checked in tests/test_forms.py).
             self.a_matrix = a_form(self.fes, self.v, self.model.eta).Assemble().mat
             self.b_matrix = self.a_matrix.CreateMatrix()
-            self.assembler = LumpedAssembler(self.arrays, self.a_matrix)
+            self.assembler = LumpedAssembler(self.arrays, self.a_matrix, self.model.lumping)
             self.region_dofs = {
                 name: np.array(self.fes.GetDofs(self.mesh.Materials(name)), dtype=bool)
                 for name in self.loads
@@ -289,16 +289,18 @@ class ATState:
 
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
-        """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7)."""
+        """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
+
+        With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
+        """
         arrays = self.arrays
         v = self.v_values
         grad_u = arrays.gradient(self.u_values)
         grad_v = arrays.gradient(v)
-        bulk = np.sum(
-            arrays.area * (arrays.vertex_mean(v * v) + self.model.eta) * (grad_u**2).sum(1)
-        )
-        surface = self.model.alpha * np.dot(arrays.mass, (1 - v) ** 2) + self.model.eps * np.sum(
-            arrays.area * (grad_v**2).sum(1)
+        square_mean = self.assembler.square_mean
+        bulk = np.sum(arrays.area * (square_mean(v) + self.model.eta) * (grad_u**2).sum(1))
+        surface = self.model.alpha * np.dot(arrays.area, square_mean(1 - v)) + self.model.eps * (
+            np.sum(arrays.area * (grad_v**2).sum(1))
         )
         return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 

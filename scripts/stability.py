@@ -6,9 +6,12 @@ two-slits, large load increments, η → 0, an under-resolved ε, obtuse meshes 
 bounded v-step, coarse and fine TOL — and at what cost?
 
 Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
-changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
-records: status (converged, not converged, failed with the error, timeout), AM iterations,
-linear solves, final total energy, min/max v, fracture time, the diagnostics and the wall time.
+changed per case as listed in ``CASES``; the cases in ``CASE_SCENES`` use their own scene
+instead (``obtuse-line``: a fixed sheared mesh, every triangle with a 161.6° angle, sheared
+anti-plane between two slanted grips until it breaks, with the lumped and with the consistent
+mass, ``lumping=false``). Each cell runs in its own process with a time limit and records:
+status (converged, not converged, failed with the error, timeout), AM iterations, linear solves,
+final total energy, min/max v, fracture time, the diagnostics and the wall time.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -28,6 +31,7 @@ import numpy as np
 
 QUICK_TIMES = np.round(np.arange(0.0, 1.61, 0.05), 10)
 GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 10)
+SHEARED_TIMES = np.round(np.arange(0.0, 0.801, 0.02), 10)
 CASES = {
     # name: (parameter changes, load times)
     "growth window Δt=0.01": ({}, GROWTH_TIMES),
@@ -39,7 +43,14 @@ CASES = {
     "TOL=1.0": ({"tol": 1.0}, QUICK_TIMES),
     "TOL=0.05": ({"tol": 0.05, "h_floor": 0.004}, QUICK_TIMES),
     "no v bounds (obtuse bisection)": ({"bounded_v": False}, QUICK_TIMES),
+    "obtuse mesh (sheared)": ({}, SHEARED_TIMES),
+    "obtuse mesh (sheared), no v bounds": ({"bounded_v": False}, SHEARED_TIMES),
+    "obtuse mesh (sheared), no v bounds, consistent mass":
+        ({"bounded_v": False, "lumping": False}, SHEARED_TIMES),
+    "obtuse mesh (sheared), consistent mass": ({"lumping": False}, SHEARED_TIMES),
 }  # fmt: skip
+# Cases with their own scene (the others run two-slits).
+CASE_SCENES = {case: "obtuse-line" for case in CASES if case.startswith("obtuse mesh (sheared)")}
 METHODS = ["am", "overrelaxed", "anderson"]
 
 
@@ -49,7 +60,7 @@ def cell(method: str, case: str, queue: multiprocessing.Queue) -> None:
     from ngat.scene import load_scene
 
     changes, times = CASES[case]
-    scene = load_scene("two-slits")
+    scene = load_scene(CASE_SCENES.get(case, "two-slits"))
     parameters, _ = scene.configure(quick=True, overrides={"nonlinear": method, **changes})
     begin = time.perf_counter()
     try:
@@ -111,7 +122,7 @@ def draw(rows: list[dict], path: Path) -> None:
     ax.set_ylim(len(cases), 0)
     ax.set_xticks(np.arange(len(methods)) + 0.5, methods)
     ax.set_yticks(np.arange(len(cases)) + 0.5, cases, fontsize=8)
-    ax.set_title("two-slits --quick: failure matrix")
+    ax.set_title("failure matrix (two-slits --quick; obtuse-line where named)")
     fig.tight_layout()
     fig.savefig(path, dpi=150)
 
