@@ -100,6 +100,11 @@ class Diagnostics:
         """Check one finished load step; return the names of the problems found."""
         found = []
         v = state.v_values
+        cause = (
+            "Hypothesis A fails on this mesh"
+            if state.model.lumping
+            else "the consistent mass (lumping=false) breaks the maximum principle"
+        )
         checks = [
             (
                 "not-converged",
@@ -115,8 +120,7 @@ class Diagnostics:
             (
                 "v-out-of-bounds",
                 v.min() < -ROUND_OFF or v.max() > 1 + ROUND_OFF,
-                f"v in [{v.min():.3g}, {v.max():.3g}]: Hypothesis A fails on this mesh "
-                "(set bounded_v=true)",
+                f"v in [{v.min():.3g}, {v.max():.3g}]: {cause} (set bounded_v=true)",
             ),
             (
                 "energy-increase",

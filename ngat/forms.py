@@ -7,6 +7,12 @@ builds the matrix graph. Every solve then gets its values from :class:`LumpedAss
 writes them in place from precomputed element stiffness matrices (one vectorised ``bincount``)
 so that the sparse Cholesky factor is refreshed with ``Inverse.Update()``, reusing its symbolic
 part; a test checks that these values equal the assembled forms.
+
+With ``lumped=False`` every lumped term is integrated exactly instead (:func:`exact_dx`): P_j(v²)
+becomes v² in a_j and the mass of b_j becomes the consistent P1 mass |T|/12 (1 + δ_ab). That
+variant has positive off-diagonal mass entries, so the v-step matrix is not an M-matrix and the
+discrete maximum principle (Proposition 3) can fail on any mesh; it exists to show what lumping
+buys (``lumping`` in :class:`ngat.parameters.ModelParameters`).
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from scipy.sparse import csr_matrix
 __all__ = [
     "vertex_rule",
     "lumped_dx",
+    "exact_dx",
     "a_form",
     "b_form",
     "mesh_edges",
@@ -39,7 +46,12 @@ def lumped_dx():
     return dx(intrules={TRIG: vertex_rule()})
 
 
-def a_form(fes: ngsolve.FESpace, v, eta: float) -> BilinearForm:
+def exact_dx():
+    """Return ``dx`` with a degree-2 rule: exact for every term of a_j and b_j with P1 data."""
+    return dx(intrules={TRIG: IntegrationRule(TRIG, 2)})
+
+
+def a_form(fes: ngsolve.FESpace, v, eta: float, lumped: bool = True) -> BilinearForm:
     """Return a_j(v; u, φ) = ∫ (P_j(v²) + η) ∇u·∇φ (paper, Definition 2).
 
     Parameters
@@ -50,17 +62,20 @@ def a_form(fes: ngsolve.FESpace, v, eta: float) -> BilinearForm:
         Phase field (GridFunction or CoefficientFunction), frozen during the u-step.
     eta
         Residual stiffness η.
+    lumped
+        ``False``: ∫ (v² + η) ∇u·∇φ, integrated exactly (consistent-mass variant).
     """
     u, phi = fes.TnT()
     form = BilinearForm(fes, symmetric=True)
-    form += (v * v + eta) * grad(u) * grad(phi) * lumped_dx()
+    form += (v * v + eta) * grad(u) * grad(phi) * (lumped_dx() if lumped else exact_dx())
     return form
 
 
-def b_form(fes: ngsolve.FESpace, u, eps: float) -> BilinearForm:
+def b_form(fes: ngsolve.FESpace, u, eps: float, lumped: bool = True) -> BilinearForm:
     """Return b_j(u; v, ψ) without its constant part: ∫ P_j(vψ)(|∇u|² + α) + ε ∇v·∇ψ.
 
-    The remaining term of Definition 2, ``-α ∫ P_j(ψ)``, is the right-hand side of the v-step.
+    The remaining term of Definition 2, ``-α ∫ P_j(ψ)``, is the right-hand side of the v-step
+    (for P1 test functions ∫ P_j(ψ) = ∫ ψ, so it is the same without lumping).
 
     Parameters
     ----------
@@ -70,11 +85,15 @@ def b_form(fes: ngsolve.FESpace, u, eps: float) -> BilinearForm:
         Displacement, frozen during the v-step.
     eps
         Regularisation length ε; α = 1/(4ε).
+    lumped
+        ``False``: ∫ vψ (|∇u|² + α), integrated exactly (the consistent P1 mass).
     """
     alpha = 1 / (4 * eps)
     v, psi = fes.TnT()
     form = BilinearForm(fes, symmetric=True)
-    form += ((grad(u) * grad(u) + alpha) * v * psi + eps * grad(v) * grad(psi)) * lumped_dx()
+    form += ((grad(u) * grad(u) + alpha) * v * psi + eps * grad(v) * grad(psi)) * (
+        lumped_dx() if lumped else exact_dx()
+    )
     return form
 
 
@@ -171,9 +190,12 @@ class LumpedAssembler:
         Element geometry of the mesh.
     matrix
         An assembled NGSolve sparse matrix on the P1 space of that mesh; only its graph is used.
+    lumped
+        ``True``: the lumped forms of Definition 2; ``False``: every lumped term integrated
+        exactly (``a_form(..., lumped=False)``, ``b_form(..., lumped=False)``).
     """
 
-    def __init__(self, arrays: MeshArrays, matrix: ngsolve.la.SparseMatrixd):
+    def __init__(self, arrays: MeshArrays, matrix: ngsolve.la.SparseMatrixd, lumped: bool = True):
         _, cols, rowptr = matrix.CSR()
         cols = np.asarray(cols, dtype=np.int64)
         rowptr = np.asarray(rowptr, dtype=np.int64)
@@ -186,20 +208,45 @@ class LumpedAssembler:
         self.diagonal = np.searchsorted(keys, np.arange(n) * n + np.arange(n))
         self.nnz = len(keys)
         self.arrays = arrays
+        self.lumped = lumped
         self.laplace = self._scatter(np.ones(arrays.ne))
 
-    def _scatter(self, coefficient: np.ndarray) -> np.ndarray:
-        weights = (coefficient[:, None, None] * self.arrays.stiffness).ravel()
+    def _scatter(self, coefficient: np.ndarray, local: np.ndarray | None = None) -> np.ndarray:
+        """Sum coefficient_T times the element matrices ``local`` (default: stiffness)."""
+        local = self.arrays.stiffness if local is None else local
+        weights = (coefficient[:, None, None] * local).ravel()
         return np.bincount(self.position, weights=weights, minlength=self.nnz)
 
+    def square_mean(self, values: np.ndarray) -> np.ndarray:
+        """Return ∫_T P_j(w²) / |T| per element for a P1 function w, or ∫_T w² / |T| unlumped.
+
+        Exactly: ∫_T w² = |T|/12 (Σ w_a² + (Σ w_a)²) over the vertex values w_a.
+        """
+        if self.lumped:
+            return self.arrays.vertex_mean(values * values)
+        local = values[self.arrays.elements]
+        return ((local * local).sum(axis=1) + local.sum(axis=1) ** 2) / 12
+
     def a_values(self, v: np.ndarray, eta: float) -> np.ndarray:
-        """Return the values of a_j(v; ·, ·): element coefficient mean(v²) + η times stiffness."""
-        return self._scatter(self.arrays.vertex_mean(v * v) + eta)
+        """Return the values of a_j(v; ·, ·): element coefficient mean(v²) + η times stiffness.
+
+        The mean of v² over T is :meth:`square_mean` (lumped or exact): ∇u·∇φ is constant on T.
+        """
+        return self._scatter(self.square_mean(v) + eta)
 
     def b_values(self, grad_u_sq: np.ndarray, eps: float) -> np.ndarray:
-        """Return the values of b_j(u; ·, ·): ε·stiffness plus lumped mass with |∇u|² + α."""
+        """Return the values of b_j(u; ·, ·): ε·stiffness plus mass weighted with |∇u|² + α.
+
+        The mass is lumped (diagonal) or, with ``lumped=False``, the consistent element mass
+        |T|/12 (1 + δ_ab).
+        """
         alpha = 1 / (4 * eps)
         arrays = self.arrays
+        if not self.lumped:
+            consistent = (np.ones((3, 3)) + np.eye(3)) / 12
+            return eps * self.laplace + self._scatter(
+                arrays.area * (grad_u_sq + alpha), consistent[None]
+            )
         diagonal = np.bincount(
             arrays.elements.ravel(),
             weights=np.repeat(arrays.area * (grad_u_sq + alpha) / 3, 3),

@@ -28,7 +28,7 @@ from ngsolve import BilinearForm, Variation, grad
 from ngsolve.la import SparseMatrixd
 
 from ngat.forms import lumped_dx
-from ngat.parameters import ModelParameters
+from ngat.parameters import ModelParameters, ParameterError
 from ngat.state import ATState, lumped_energies
 
 __all__ = ["NewtonSolver", "energy_form"]
@@ -68,6 +68,11 @@ class NewtonSolver:
     """
 
     def __init__(self, state: ATState, armijo: float = 1e-4, max_halvings: int = 10):
+        if not state.model.lumping:
+            raise ParameterError(
+                "Newton steps are derived for the lumped functional (eq. 7): with lumping=false "
+                "choose nonlinear=am, overrelaxed or anderson"
+            )
         self.state = state
         self.armijo = armijo
         self.max_halvings = max_halvings

@@ -52,12 +52,19 @@ class ModelParameters:
     irreversibility
         ``"crtol"``: v = 0 on CR(t_k) (the paper's choice); ``"pointwise"``: v ≤ v(t_{k−1})
         (eq. 3), a bound-constrained v-step.
+    lumping
+        ``True``: the mass-lumped functional I_j of eq. (7); ``False``: the same functional
+        with P_j dropped, every term integrated exactly (consistent P1 mass, :mod:`ngat.forms`).
+        Without lumping the discrete maximum principle (Proposition 3) can fail even on
+        non-obtuse meshes (once h ≳ 5ε); the option exists to show that. The estimators of
+        Proposition 4 are unchanged (they are derived for the lumped functional).
     """
 
     eps: float = 0.05
     eta: float = 1e-5
     crtol: float = 1e-4
     irreversibility: str = "crtol"
+    lumping: bool = True
 
     @property
     def alpha(self) -> float:

@@ -36,7 +36,11 @@ class SceneError(ValueError):
 
 
 def lumped_energies(
-    arrays: MeshArrays, model: ModelParameters, u: np.ndarray, v: np.ndarray
+    arrays: MeshArrays,
+    model: ModelParameters,
+    u: np.ndarray,
+    v: np.ndarray,
+    square_mean: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, float]:
     """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
 
@@ -48,11 +52,19 @@ def lumped_energies(
         ε, η and α = 1/(4ε).
     u, v
         Nodal values of the two P1 fields.
+    square_mean
+        Per-element ∫_T f² / |T| of a P1 function f; the default is the vertex rule (eq. 7),
+        :meth:`ngat.forms.LumpedAssembler.square_mean` without lumping gives the exact value.
     """
+    if square_mean is None:
+
+        def square_mean(f):
+            return arrays.vertex_mean(f * f)
+
     grad_u = arrays.gradient(u)
     grad_v = arrays.gradient(v)
-    bulk = np.sum(arrays.area * (arrays.vertex_mean(v * v) + model.eta) * (grad_u**2).sum(1))
-    surface = model.alpha * np.dot(arrays.mass, (1 - v) ** 2) + model.eps * np.sum(
+    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * (grad_u**2).sum(1))
+    surface = model.alpha * np.dot(arrays.area, square_mean(1 - v)) + model.eps * np.sum(
         arrays.area * (grad_v**2).sum(1)
     )
     return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
@@ -148,7 +160,7 @@ class ATState:
             # checked in tests/test_forms.py).
             self.a_matrix = a_form(self.fes, self.v, self.model.eta).Assemble().mat
             self.b_matrix = self.a_matrix.CreateMatrix()
-            self.assembler = LumpedAssembler(self.arrays, self.a_matrix)
+            self.assembler = LumpedAssembler(self.arrays, self.a_matrix, self.model.lumping)
             self.region_dofs = {
                 name: np.array(self.fes.GetDofs(self.mesh.Materials(name)), dtype=bool)
                 for name in self.loads
@@ -360,8 +372,13 @@ class ATState:
 
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
-        """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7)."""
-        return lumped_energies(self.arrays, self.model, self.u_values, self.v_values)
+        """Return bulk, surface and total energy of I_j (paper, eq. 7).
+
+        With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
+        """
+        return lumped_energies(
+            self.arrays, self.model, self.u_values, self.v_values, self.assembler.square_mean
+        )
 
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.

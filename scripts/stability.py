@@ -8,11 +8,14 @@ bounded v-step, coarse and fine TOL — and at what cost? And how does the itera
 (CG with NGSolve's h1amg, ``linear_solver=cg-h1amg``) degrade against the direct one as η → 0?
 
 Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element floor 0.004),
-changed per case as listed in ``CASES``. Each cell runs in its own process with a time limit and
-records: status (converged, not converged, failed with the error, timeout and the load time
-reached), AM iterations, linear solves, Newton steps, rejected accelerated or Newton steps, CG
-iterations (total and most per solve; 0 with the direct solver), final total energy, min/max v,
-fracture time, the diagnostics, the wall time and the time in linear solves.
+changed per case as listed in ``CASES``; the cases in ``CASE_SCENES`` use their own scene
+instead (``obtuse-line``: a fixed sheared mesh, every triangle with a 161.6° angle, sheared
+anti-plane between two slanted grips until it breaks, with the lumped and with the consistent
+mass, ``lumping=false``). Each cell runs in its own process with a time limit and records:
+status (converged, not converged, failed with the error, timeout and the load time reached), AM
+iterations, linear solves, Newton steps, rejected accelerated or Newton steps, CG iterations
+(total and most per solve; 0 with the direct solver), final total energy, min/max v, fracture
+time, the diagnostics, the wall time and the time in linear solves.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -35,6 +38,7 @@ from ngat.parameters import NONLINEAR_SOLVERS
 QUICK_TIMES = np.round(np.arange(0.0, 1.61, 0.05), 10)
 LONG_TIMES = np.round(np.arange(0.0, 2.01, 0.05), 10)  # coarse meshes break late
 GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 10)
+SHEARED_TIMES = np.round(np.arange(0.0, 0.801, 0.02), 10)
 CASES = {
     # name: (parameter changes, load times)
     "growth window Δt=0.01": ({}, GROWTH_TIMES),
@@ -50,7 +54,14 @@ CASES = {
     "CG+h1amg η=1e-3": ({"linear_solver": "cg-h1amg", "eta": 1e-3}, QUICK_TIMES),
     "CG+h1amg η=1e-5": ({"linear_solver": "cg-h1amg"}, QUICK_TIMES),
     "CG+h1amg η=1e-8": ({"linear_solver": "cg-h1amg", "eta": 1e-8}, QUICK_TIMES),
+    "obtuse mesh (sheared)": ({}, SHEARED_TIMES),
+    "obtuse mesh (sheared), no v bounds": ({"bounded_v": False}, SHEARED_TIMES),
+    "obtuse mesh (sheared), no v bounds, consistent mass":
+        ({"bounded_v": False, "lumping": False}, SHEARED_TIMES),
+    "obtuse mesh (sheared), consistent mass": ({"lumping": False}, SHEARED_TIMES),
 }  # fmt: skip
+# Cases with their own scene (the others run two-slits).
+CASE_SCENES = {case: "obtuse-line" for case in CASES if case.startswith("obtuse mesh (sheared)")}
 METHODS = list(NONLINEAR_SOLVERS)
 
 
@@ -64,7 +75,7 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
     from ngat.scene import load_scene
 
     changes, times = CASES[case]
-    scene = load_scene("two-slits")
+    scene = load_scene(CASE_SCENES.get(case, "two-slits"))
     parameters, _ = scene.configure(quick=True, overrides={"nonlinear": method, **changes})
     begin = time.perf_counter()
 
@@ -156,7 +167,7 @@ def draw(rows: list[dict], path: Path) -> None:
     ax.set_ylim(len(cases), 0)
     ax.set_xticks(np.arange(len(methods)) + 0.5, methods)
     ax.set_yticks(np.arange(len(cases)) + 0.5, cases, fontsize=8)
-    ax.set_title("two-slits --quick: failure matrix")
+    ax.set_title("failure matrix (two-slits --quick; obtuse-line where named)")
     fig.tight_layout()
     fig.savefig(path, dpi=150)
 

@@ -4,41 +4,14 @@ import json
 
 import numpy as np
 import pytest
-from ngsolve import Mesh
-from ngsolve.meshes import MakeStructured2DMesh
 
+from geometries.obtuse_line import scene as OBTUSE
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
 from ngat.minimization import ConvergenceError
-from ngat.scene import Scene, load_scene
+from ngat.parameters import ParameterError
+from ngat.scene import load_scene
 from ngat.state import ATState
-
-
-def sheared_mesh(maxh, shear=4.0):
-    """Structured mesh of the unit square sheared by x → x + shear·y: obtuse triangles.
-
-    The elements with x − shear·y < 0.1 form the material ``grip`` (Ω_D), the rest ``body``.
-    """
-    n = round(1 / maxh)
-    mesh = MakeStructured2DMesh(quads=False, nx=n, ny=n, mapping=lambda a, b: (a + shear * b, b))
-    ngmesh = mesh.ngmesh
-    elements = ngmesh.Elements2D().NumPy()
-    xy = ngmesh.Coordinates()[elements["nodes"][:, :3] - 1].mean(axis=1)
-    elements["index"] = np.where(xy[:, 0] - shear * xy[:, 1] < 0.1, 1, 2)
-    ngmesh.SetMaterial(1, "grip")
-    ngmesh.SetMaterial(2, "body")
-    return Mesh(ngmesh)
-
-
-OBTUSE = Scene(
-    name="obtuse-line",
-    geometry=None,
-    mesh=sheared_mesh,
-    loads={"grip": lambda t: 0 * t},
-    times=[0.0],
-    crack=lambda xy: np.abs(xy[:, 1] - 0.5) < 1e-9,
-    parameters={"maxh": 0.05, "adapt": "fixed"},
-)
 
 
 def problems(folder):
@@ -63,6 +36,29 @@ def test_v_out_of_bounds_without_hypothesis_a(tmp_path):
     assert result.records[-1]["v_max"] <= 1 + 1e-12
     assert result.records[-1]["v_bound_active"] > 0
     assert "v-out-of-bounds" not in problems(tmp_path / "bounded")
+
+
+def test_v_out_of_bounds_without_lumping(tmp_path):
+    # Non-obtuse aligned mesh, h = 10 ε: the lumped v-step keeps 0 ≤ v ≤ 1, the consistent
+    # mass overshoots by 30 % at the side walls (tests/test_lumping.py) and is detected.
+    scene = load_scene("profile-1d")
+    changes = {"adapt": "fixed", "maxh": 0.1, "eps": 0.01, "bounded_v": False, "nonlinear": "am"}
+    for lumping in (True, False):
+        parameters, times = scene.configure(overrides={**changes, "lumping": lumping})
+        result = run(scene, parameters, times, tmp_path / str(lumping))
+        assert ("v-out-of-bounds" in problems(tmp_path / str(lumping))) is not lumping
+    assert result.records[-1]["v_max"] == pytest.approx(1.2997450, abs=1e-6)
+    messages = [
+        p["message"] for p in result.summary["diagnostics"] if p["kind"] == "v-out-of-bounds"
+    ]
+    assert "lumping=false" in messages[0]
+    # On the obtuse mesh it fires with and without lumping.
+    parameters, times = OBTUSE.configure(
+        overrides={"bounded_v": False, "lumping": False, "nonlinear": "am"}
+    )
+    result = run(OBTUSE, parameters, times, tmp_path / "obtuse")
+    assert result.records[-1]["v_max"] == pytest.approx(1.0294994, abs=1e-6)
+    assert "v-out-of-bounds" in problems(tmp_path / "obtuse")
 
 
 def coarse_two_slits(**overrides):
@@ -97,6 +93,12 @@ def test_eps_under_resolved_before_any_crack(tmp_path):
     assert 0.1 < result.records[-1]["v_min"] < 0.9
     assert problems(tmp_path / "run") == {"eps-under-resolved"}
     assert "most damaged point" in (tmp_path / "run" / "run.log").read_text()
+
+
+def test_newton_without_lumping_is_refused(tmp_path):
+    parameters, times = OBTUSE.configure(overrides={"lumping": False})
+    with pytest.raises(ParameterError, match="lumping=false"):
+        run(OBTUSE, parameters, times, tmp_path / "run")
 
 
 def test_energy_increase_is_detected(tmp_path, monkeypatch):

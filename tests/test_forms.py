@@ -1,10 +1,19 @@
 """The lumped rule and the forms a_j, b_j (paper, Definition 2 and Hypothesis A)."""
 
 import numpy as np
-from ngsolve import H1, TRIG, CoefficientFunction, H1LumpingFESpace, Integrate, x, y
+import pytest
+from ngsolve import H1, TRIG, CoefficientFunction, H1LumpingFESpace, Integrate, grad, x, y
 from ngsolve.meshes import MakeStructured2DMesh
 
-from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form, lumped_dx, vertex_rule
+from ngat.forms import (
+    LumpedAssembler,
+    MeshArrays,
+    a_form,
+    b_form,
+    exact_dx,
+    lumped_dx,
+    vertex_rule,
+)
 from ngat.parameters import ModelParameters
 from ngat.scene import load_scene
 from ngat.state import ATState
@@ -36,15 +45,17 @@ def test_lumped_rule_integrates_nodal_interpolant():
     assert abs(exact - 1 / 3) > 1e-3
 
 
-def test_fast_assembly_equals_ngsolve_forms():
+@pytest.mark.parametrize("lumped", [True, False])
+def test_fast_assembly_equals_ngsolve_forms(lumped):
     scene = load_scene("two-slits")
     state = ATState(scene.make_mesh(0.5), ModelParameters(), scene.loads)
     state.v.Set(0.5 + 0.4 * x * y / 42)
     state.u.Set(x * x - y)
-    a, b = a_form(state.fes, state.v, 1e-5), b_form(state.fes, state.u, 0.05)
+    a = a_form(state.fes, state.v, 1e-5, lumped=lumped)
+    b = b_form(state.fes, state.u, 0.05, lumped=lumped)
     a.Assemble()
     b.Assemble()
-    assembler = LumpedAssembler(state.arrays, a.mat)
+    assembler = LumpedAssembler(state.arrays, a.mat, lumped=lumped)
     grad_u_sq = (state.arrays.gradient(state.u_values) ** 2).sum(axis=1)
     np.testing.assert_allclose(
         assembler.a_values(state.v_values, 1e-5), a.mat.AsVector().FV().NumPy(), atol=1e-12
@@ -52,6 +63,45 @@ def test_fast_assembly_equals_ngsolve_forms():
     np.testing.assert_allclose(
         assembler.b_values(grad_u_sq, 0.05), b.mat.AsVector().FV().NumPy(), atol=1e-11
     )
+
+
+def test_unlumped_forms_differ_from_lumped_ones():
+    # The consistent-mass values must not coincide with the lumped ones (else the test above
+    # would not tell the two apart): the mass moves weight off the diagonal.
+    mesh = MakeStructured2DMesh(quads=False, nx=4, ny=4)
+    a = a_form(H1(mesh, order=1), 1.0, 0.0).Assemble()
+    lumped, consistent = (LumpedAssembler(MeshArrays(mesh), a.mat, lumped=k) for k in (True, False))
+    rng = np.random.default_rng(1)
+    v, grad_u_sq = rng.uniform(0, 1, mesh.nv), rng.uniform(0, 5, mesh.ne)
+    assert np.abs(lumped.a_values(v, 0) - consistent.a_values(v, 0)).max() > 1e-3
+    assert (
+        np.abs(lumped.b_values(grad_u_sq, 0.05) - consistent.b_values(grad_u_sq, 0.05)).max() > 1e-3
+    )
+    # The total mass Σ_ab M_ab = ∫ 1 is the same, so the sums of all entries agree.
+    np.testing.assert_allclose(
+        lumped.b_values(grad_u_sq, 0.05).sum(), consistent.b_values(grad_u_sq, 0.05).sum()
+    )
+
+
+@pytest.mark.parametrize("lumping", [True, False])
+def test_energies_equal_ngsolve_integrals(lumping):
+    # I_j of eq. (7) with the vertex rule, or without P_j integrated exactly.
+    scene = load_scene("two-slits")
+    model = ModelParameters(lumping=lumping)
+    state = ATState(scene.make_mesh(0.5), model, scene.loads)
+    state.v.Set(0.5 + 0.4 * x * y / 42)
+    state.u.Set(x * x - y)
+    u, v = state.u, state.v
+    rule = lumped_dx() if lumping else exact_dx()
+    bulk = Integrate((v * v + model.eta) * grad(u) * grad(u) * rule, state.mesh)
+    surface = Integrate(
+        (model.alpha * (1 - v) * (1 - v) + model.eps * grad(v) * grad(v)) * rule, state.mesh
+    )
+    energies = state.energies()
+    np.testing.assert_allclose([energies["bulk"], energies["surface"]], [bulk, surface], rtol=1e-12)
+    other = ATState(state.mesh, ModelParameters(lumping=not lumping), scene.loads)
+    other.u_values[:], other.v_values[:] = state.u_values, state.v_values
+    assert abs(other.energies()["total"] / energies["total"] - 1) > 1e-4
 
 
 def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
@@ -69,3 +119,13 @@ def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
     off = rows != np.asarray(cols, dtype=np.int64)
     assert values[off].max() <= 1e-14
     assert values[~off].min() > 0
+    # Without lumping the mass has positive off-diagonals |T|/12 (|∇u|² + α): on the 36
+    # hypotenuses, whose stiffness entry is 0 (right angle opposite), b_j is positive off the
+    # diagonal even with ∇u = 0, so it is not an M-matrix on this non-obtuse mesh.
+    alpha = 1 / (4 * 0.05)
+    consistent = LumpedAssembler(arrays, fes_mat.mat, lumped=False).b_values(
+        np.zeros(arrays.ne), 0.05
+    )
+    positive = consistent[off][consistent[off] > 0]
+    assert len(positive) == 2 * 36
+    np.testing.assert_allclose(positive, 2 * arrays.area[0] / 12 * alpha, rtol=1e-12)
