@@ -143,7 +143,7 @@ class SolverParameters:
     am_max_iter: int = 1000
     max_cg: int = 0
     linear_solver: str = "direct"
-    nonlinear: str = "newton"
+    nonlinear: str = "am"
     omega: float = 1.5
     anderson_depth: int = 5
     newton_switch: float = 0.1

@@ -96,7 +96,7 @@ def test_eps_under_resolved_before_any_crack(tmp_path):
 
 
 def test_newton_without_lumping_is_refused(tmp_path):
-    parameters, times = OBTUSE.configure(overrides={"lumping": False})
+    parameters, times = OBTUSE.configure(overrides={"lumping": False, "nonlinear": "newton"})
     with pytest.raises(ParameterError, match="lumping=false"):
         run(OBTUSE, parameters, times, tmp_path / "run")
 
