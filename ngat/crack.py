@@ -5,7 +5,9 @@ nodes on their two faces (:mod:`ngat.geometry`), so no edge of this graph crosse
 set of vertices is connected exactly when it is connected inside the body. Two sets are used:
 
 - the crack set {v < threshold}: its component(s) touching a slit are that slit's crack, whose
-  tip is the crack vertex farthest from the slit's mouth (:func:`crack_tips`);
+  tip is the point of {v_h < threshold} (v_h the P1 interpolant) farthest from the slit's mouth
+  (:func:`crack_tips`): a crack vertex or where v_h crosses the threshold on an edge leaving
+  the crack, so that the tip moves continuously and not from vertex to vertex;
 - the sound set {v ≥ threshold}: the body holds while it connects the Dirichlet regions
   (:func:`connects`); the fracture time of a run is the first load time at which it no longer does.
 
@@ -67,10 +69,13 @@ def crack_tips(
 
     A slit's crack is the union of the components of {v < threshold} that reach the slit: that
     hold a vertex within one element size ``h`` of the slit segment, ``h`` the largest diameter of
-    the elements at the vertex nearest to the slit tip. Its tip is the crack vertex farthest
-    (Euclidean) from the slit's *mouth*; measuring from the mouth, not the tip, keeps damage along
-    the slit faces from being taken for the tip. When the cracks of two slits have joined, each
-    slit's tip lies on the other slit's side (where the joined crack ends).
+    the elements at the vertex nearest to the slit tip. Its tip is the point of the crack's part
+    of {v_h < threshold} farthest (Euclidean) from the slit's *mouth*: a crack vertex or the
+    point where v_h crosses the threshold on an edge to a sound vertex (linear interpolation,
+    below one element size from the farthest crack vertex). Measuring from the mouth, not the
+    tip, keeps damage along the slit faces from being taken for the tip. When the cracks of two
+    slits have joined, each slit's tip lies on the other slit's side (where the joined crack
+    ends).
 
     Parameters
     ----------
@@ -88,8 +93,8 @@ def crack_tips(
     list of (float, float)
         One tip per slit; the slit tip itself where no crack reaches the slit.
     """
-    coords = arrays.coords
-    labels = components(arrays, np.asarray(v) < threshold)
+    coords, v = arrays.coords, np.asarray(v, dtype=float)
+    labels = components(arrays, v < threshold)
     cracked = labels >= 0
     tips = []
     for mouth, tip in slits:
@@ -101,10 +106,27 @@ def crack_tips(
         if not crack.any():
             tips.append((float(tip[0]), float(tip[1])))
             continue
-        candidates = np.flatnonzero(crack)
-        far = candidates[np.argmax(np.linalg.norm(coords[candidates] - mouth, axis=1))]
-        tips.append((float(coords[far, 0]), float(coords[far, 1])))
+        candidates = np.vstack([coords[crack], _crossings(arrays, v, crack, cracked, threshold)])
+        far = candidates[np.argmax(np.linalg.norm(candidates - mouth, axis=1))]
+        tips.append((float(far[0]), float(far[1])))
     return tips
+
+
+def _crossings(
+    arrays: MeshArrays, v: np.ndarray, crack: np.ndarray, cracked: np.ndarray, threshold: float
+) -> np.ndarray:
+    """Return the points where v_h = threshold on the edges from ``crack`` to sound vertices.
+
+    With the crack vertices these are the corners of the crack's part of {v_h < threshold}
+    (v_h the P1 interpolant), so its farthest point from the mouth is one of them.
+    """
+    first, second = arrays.edges.T
+    inner = np.where(crack[first], first, second)
+    outer = np.where(crack[first], second, first)
+    leaving = (crack[first] != crack[second]) & ~cracked[outer]
+    inner, outer = inner[leaving], outer[leaving]
+    s = (threshold - v[inner]) / (v[outer] - v[inner])
+    return arrays.coords[inner] + s[:, None] * (arrays.coords[outer] - arrays.coords[inner])
 
 
 def connects(

@@ -186,6 +186,8 @@ def run(
                 cg_max_iterations=step.cg_max_iterations,
                 fallbacks=step.fallbacks,
                 newton_steps=step.newton_steps,
+                escapes=step.escapes,
+                curvature_solves=step.curvature_solves,
             )
             record.update(crack_measures(state, scene))
             if "fracture_time" not in summary and record.get("connected") is False:

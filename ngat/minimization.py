@@ -74,8 +74,14 @@ class StepResult:
         Accelerated iterates rejected by the energy safeguard, and rejected Newton steps.
     newton_steps
         Accepted Newton steps (``nonlinear="newton"``).
+    escapes
+        Steps along a direction of negative curvature of I_j (away from a saddle) instead of
+        a Newton step.
     linear_solves
         Linear systems solved during the step.
+    curvature_solves
+        Solves with a Newton factorisation already computed, in the search for negative
+        curvature (Lanczos steps).
     cg_iterations
         CG iterations of the step's solves (``linear_solver="cg-h1amg"``; 0 with ``direct``).
     cg_max_iterations
@@ -95,7 +101,9 @@ class StepResult:
     energy_increases: int = 0
     fallbacks: int = 0
     newton_steps: int = 0
+    escapes: int = 0
     linear_solves: int = 0
+    curvature_solves: int = 0
     cg_iterations: int = 0
     cg_max_iterations: int = 0
     cg_not_converged: int = 0
@@ -201,7 +209,7 @@ def alternating_minimization(
         If a half-step produces NaN or Inf.
     """
     result = StepResult()
-    solves_before = state.linear_solves
+    solves_before = state.linear_solves, state.curvature_solves
     cg_before = (len(state.cg_iterations), state.cg_not_converged)
     state.v_values[state.crack_set()] = 0.0
     accelerator = None
@@ -244,11 +252,13 @@ def alternating_minimization(
             break
         if newton and change < newton_below:
             ceiling = accelerator.plain_energy if accelerator and accelerator.has_plain else np.inf
+            escapes = newton.escapes
             if newton.step(state.crack_set(), ceiling):
-                result.newton_steps += 1
                 result.energies.append(state.energies()["total"])
                 if accelerator:
                     accelerator.restart()
+                result.newton_steps += newton.escapes == escapes
+                result.escapes += newton.escapes - escapes
             else:
                 # Too far from a minimiser for Newton: wait until the iteration has halved.
                 result.fallbacks += 1
@@ -260,7 +270,8 @@ def alternating_minimization(
             solver.am_max_iter,
             result.change,
         )
-    result.linear_solves = state.linear_solves - solves_before
+    result.linear_solves = state.linear_solves - solves_before[0]
+    result.curvature_solves = state.curvature_solves - solves_before[1]
     cg_counts = state.cg_iterations[cg_before[0] :]
     result.cg_iterations = sum(cg_counts)
     result.cg_max_iterations = max(cg_counts, default=0)

@@ -16,6 +16,11 @@ P(w + s δ), s = 1, ½, ¼, … until I_j decreases by the Armijo condition. Awa
 the Hessian may be indefinite and δ no descent direction: the step is then rejected and the
 caller continues with alternating minimisation, so Newton starts from an
 alternating-minimisation iterate (:func:`ngat.minimization.alternating_minimization`).
+
+Newton converges to saddles of I_j as readily as to minimisers, and the quasi-static path
+passes near saddles exactly where the crack is about to move. Where the iteration would stop,
+:meth:`NewtonSolver.escape_saddle` therefore looks for negative curvature with a few Lanczos
+steps on H⁻¹ and, if it finds some, steps along it and lets the iteration go on.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import ngsolve
 import numpy as np
 from ngsolve import BilinearForm, Variation, grad
 from ngsolve.la import SparseMatrixd
+from scipy.linalg import eigh_tridiagonal
 
 from ngat.forms import lumped_dx
 from ngat.parameters import ModelParameters, ParameterError
@@ -67,7 +73,14 @@ class NewtonSolver:
         Backtracking steps before the Newton step is rejected.
     """
 
-    def __init__(self, state: ATState, armijo: float = 1e-4, max_halvings: int = 10):
+    def __init__(
+        self,
+        state: ATState,
+        armijo: float = 1e-4,
+        max_halvings: int = 10,
+        lanczos_steps: int = 10,
+        escape_size: float = 0.1,
+    ):
         if not state.model.lumping:
             raise ParameterError(
                 "Newton steps are derived for the lumped functional (eq. 7): with lumping=false "
@@ -76,6 +89,9 @@ class NewtonSolver:
         self.state = state
         self.armijo = armijo
         self.max_halvings = max_halvings
+        self.lanczos_steps = lanczos_steps
+        self.escape_size = escape_size
+        self.escapes = 0
         self._arrays = None
 
     def _setup(self) -> None:
@@ -164,22 +180,14 @@ class NewtonSolver:
         local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
         return np.bincount(self.position, weights=local, minlength=self.nnz)
 
-    def step(self, crack: np.ndarray, ceiling: float = np.inf) -> bool:
-        """Try one Newton step from the state's (u, v); return whether it was accepted.
-
-        Parameters
-        ----------
-        crack
-            Boolean DOF mask of CR(t_k), where v stays 0.
-        ceiling
-            The step is accepted only if I_j ends at or below this value as well (an
-            accelerated iterate may lie above the last plain iterate's energy).
+    def _factorise(self, crack: np.ndarray) -> tuple:
+        """Assemble and factorise the projected Hessian at the state's (u, v).
 
         Returns
         -------
-        bool
-            ``True`` if the state now holds the Newton iterate, ``False`` if the direction was
-            not a descent direction or no step length decreased I_j (the state is unchanged).
+        tuple
+            u, v (copies), the upper bound of v, ∇I_j and the held DOFs: u on Ω_D, v on CR(t_k)
+            and where the gradient pushes v out of its bounds.
         """
         state = self.state
         if self._arrays is not state.arrays:
@@ -203,22 +211,119 @@ class NewtonSolver:
                 self.inverse = self.matrix.Inverse(inverse="sparsecholesky")
             else:
                 self.inverse.Update()
-            self.rhs.FV().NumPy()[:] = np.where(held, 0.0, -gradient)
-            self.delta.data = self.inverse * self.rhs
-            state.linear_solves += 1
-        delta = self.delta.FV().NumPy().copy()
+        return u, v, upper, gradient, held
+
+    def step(self, crack: np.ndarray, ceiling: float = np.inf) -> bool:
+        """Try one Newton step from the state's (u, v); return whether the state moved.
+
+        If a few Lanczos steps find negative curvature of I_j, the step goes along that
+        direction instead (:meth:`negative_curvature`): Newton's method is attracted by saddles
+        as much as by minimisers, and the quasi-static path passes near saddles exactly where
+        the crack is about to move, where alternating minimisation (a descent method) leaves
+        along the direction of negative curvature.
+
+        Parameters
+        ----------
+        crack
+            Boolean DOF mask of CR(t_k), where v stays 0.
+        ceiling
+            The step is accepted only if I_j ends at or below this value as well (an
+            accelerated iterate may lie above the last plain iterate's energy).
+
+        Returns
+        -------
+        bool
+            ``True`` if the state now holds the new iterate, ``False`` if the direction was
+            not a descent direction or no step length decreased I_j (the state is unchanged).
+        """
+        u, v, upper, gradient, held = self._factorise(crack)
+        residual = np.where(held, 0.0, -gradient)
+        if not np.any(residual):
+            return False
+        with self.state.timer("solve"):
+            delta = self._apply_inverse(residual)
+            self.state.linear_solves += 1
+            found = self.negative_curvature(residual, delta)
+        if found is not None:
+            direction, curvature = found
+            if np.dot(gradient, direction) > 0:
+                direction = -direction
+            factor = self.escape_size / max(np.max(np.abs(direction[len(u) :])), 1e-300)
+            self.escapes += 1
+            log.debug("negative curvature %.3g: stepping along it", curvature)
+            return self._line_search(
+                u, v, factor * direction, factor * float(np.dot(gradient, direction)),
+                curvature * factor**2, crack, upper, ceiling,
+            )  # fmt: skip
         slope = float(np.dot(gradient, delta))
         if not slope < 0:
             log.debug("Newton direction is not a descent direction (∇I·δ = %.3g)", slope)
             return False
+        return self._line_search(u, v, delta, slope, 0.0, crack, upper, ceiling)
+
+    def _apply_inverse(self, x: np.ndarray) -> np.ndarray:
+        """Return H⁻¹ x with the current factorisation."""
+        self.rhs.FV().NumPy()[:] = x
+        self.delta.data = self.inverse * self.rhs
+        return self.delta.FV().NumPy().copy()
+
+    def negative_curvature(
+        self, start: np.ndarray, image: np.ndarray
+    ) -> tuple[np.ndarray, float] | None:
+        """Look for a direction d with dᵀHd < 0 by a few Lanczos steps on H⁻¹.
+
+        A Ritz vector x of H⁻¹ with Ritz value θ < 0 gives d = H⁻¹x with dᵀHd = xᵀH⁻¹x = θ
+        (‖x‖ = 1). Near a saddle the negative eigenvalue λ of H is small, so 1/λ is an extreme
+        eigenvalue of H⁻¹, which Lanczos finds first. Started from the Newton system's right
+        side, whose solve is the first step; every further step is one solve with the
+        factorisation at hand, counted in ``state.curvature_solves``.
+
+        Parameters
+        ----------
+        start
+            Starting vector (nonzero, zero on held DOFs).
+        image
+            H⁻¹ ``start``.
+
+        Returns
+        -------
+        tuple or None
+            (d, dᵀHd), or ``None`` if no negative Ritz value appeared.
+        """
+        steps = self.lanczos_steps
+        basis, images = np.empty((steps, len(start))), np.empty((steps, len(start)))
+        diagonal, offdiagonal = np.zeros(steps), np.zeros(steps)
+        norm = np.linalg.norm(start)
+        basis[0], images[0] = start / norm, image / norm
+        for k in range(steps):
+            if k:
+                images[k] = self._apply_inverse(basis[k])
+                self.state.curvature_solves += 1
+            diagonal[k] = basis[k] @ images[k]
+            ritz, vectors = eigh_tridiagonal(diagonal[: k + 1], offdiagonal[:k])
+            if ritz[0] < -1e-8 * np.max(np.abs(ritz)):
+                return images[: k + 1].T @ vectors[:, 0], float(ritz[0])
+            # Full reorthogonalisation against the basis so far.
+            w = images[k] - basis[: k + 1].T @ (basis[: k + 1] @ images[k])
+            offdiagonal[k] = np.linalg.norm(w)
+            if k + 1 == steps or offdiagonal[k] <= 1e-10 * abs(diagonal[k]):
+                return None
+            basis[k + 1] = w / offdiagonal[k]
+        return None
+
+    def _line_search(self, u, v, direction, slope, curvature, crack, upper, ceiling) -> bool:
+        """Backtrack along P(w + s d) until I_j ≤ I(w) + c (s ∇I·d + s² dᵀHd / 2) and ≤ ceiling."""
+        state = self.state
+        n = len(u)
         start = lumped_energies(state.arrays, state.model, u, v)["total"]
         scale = 1.0
         for _ in range(self.max_halvings + 1):
-            u_trial = u + scale * delta[:n]
-            v_trial = np.clip(v + scale * delta[n:], 0.0, upper)
+            u_trial = u + scale * direction[:n]
+            v_trial = np.clip(v + scale * direction[n:], 0.0, upper)
             v_trial[crack] = 0.0
             energy = lumped_energies(state.arrays, state.model, u_trial, v_trial)["total"]
-            if energy <= min(start + self.armijo * scale * slope, ceiling):
+            model = scale * slope + 0.5 * scale**2 * curvature
+            if energy <= min(start + self.armijo * model, ceiling):
                 state.u_values[:] = u_trial
                 state.v_values[:] = v_trial
                 return True

@@ -99,7 +99,10 @@ class ATState:
     Attributes
     ----------
     linear_solves : int
-        Linear systems solved so far.
+        Linear systems solved so far (each with a new matrix or a lagged factorisation).
+    curvature_solves : int
+        Extra solves with the Newton factorisation already computed (Lanczos steps of
+        :meth:`ngat.newton.NewtonSolver.negative_curvature`).
     cg_iterations : list of int
         CG iterations of every ``cg-h1amg`` solve so far.
     cg_not_converged : int
@@ -133,6 +136,7 @@ class ATState:
         self.bounded_v = bounded_v
         self.linear_solver = linear_solver
         self.linear_solves = 0
+        self.curvature_solves = 0
         self.cg_iterations: list[int] = []
         self.cg_not_converged = 0
         self.t = Parameter(0.0)

@@ -13,7 +13,8 @@ instead (``obtuse-line``: a fixed sheared mesh, every triangle with a 161.6° an
 anti-plane between two slanted grips until it breaks, with the lumped and with the consistent
 mass, ``lumping=false``). Each cell runs in its own process with a time limit and records:
 status (converged, not converged, failed with the error, timeout and the load time reached), AM
-iterations, linear solves, Newton steps, rejected accelerated or Newton steps, CG iterations
+iterations, linear solves, Newton steps, steps along negative curvature and the extra solves
+that found it, rejected accelerated or Newton steps, CG iterations
 (total and most per solve; 0 with the direct solver), final total energy, min/max v, fracture
 time, the diagnostics, the wall time and the time in linear solves.
 
@@ -91,6 +92,8 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
             "am_iterations": sum(r["am_iterations"] for r in records),
             "linear_solves": sum(r["linear_solves"] for r in records),
             "newton_steps": sum(r["newton_steps"] for r in records),
+            "escapes": sum(r["escapes"] for r in records),
+            "curvature_solves": sum(r["curvature_solves"] for r in records),
             "fallbacks": sum(r["fallbacks"] for r in records),
             "cg_iterations": sum(r["cg_iterations"] for r in records),
             "cg_max_iterations": max(r["cg_max_iterations"] for r in records),

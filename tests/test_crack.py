@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from ngsolve import H1
+from ngsolve import H1, GridFunction
 
 from geometries.two_slits import SLITS
 from ngat.crack import components, connects, crack_tips, mesh_edges
@@ -68,6 +68,20 @@ def test_crack_tip_is_the_end_of_the_band_grown_from_the_slit(two_slits):
     assert np.hypot(*np.subtract(tips[0], (2, 0))) > np.hypot(0.8, 2.8) - 1e-9
     assert tips[1] == (4.0, 4.0)
     assert connects(arrays, v, regions["left"], regions["right"])
+
+
+def test_crack_tip_lies_on_the_threshold_level_set_between_vertices():
+    mesh = load_scene("two-slits").make_mesh(0.25)
+    arrays = MeshArrays(mesh)
+    along = (arrays.coords - 2) @ np.array([1.0, 1.0]) / np.sqrt(2)
+    v_h = GridFunction(H1(mesh, order=1))
+    for end in (0.9, 0.93, 0.96):  # the band's end moves by less than an element
+        v = np.maximum(band(arrays.coords, (2, 2), (4, 4), 0.3), np.clip(along - end, 0, 1))
+        v_h.vec.FV().NumPy()[:] = v
+        (x, y), _ = crack_tips(arrays, v, SLITS)
+        assert abs(v_h(mesh(x, y)) - 0.1) < 1e-9  # on the level set, not at a vertex
+        # v_h is linear along the band's axis there: the tip follows the end continuously.
+        assert abs((x + y - 4) / np.sqrt(2) - (end + 0.1)) < 0.3, (x, y)
 
 
 def test_joined_cracks_break_the_body(two_slits):

@@ -113,3 +113,45 @@ def test_pointwise_irreversibility_keeps_v_below_the_previous_step(tmp_path):
     assert worst[0] <= 1e-12
     assert result.records[-1]["v_min"] < 0.5, "the test should damage the body"
     assert result.records[-1]["v_bound_active"] > 0
+
+
+def test_negative_curvature_direction_has_the_curvature_it_reports():
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
+    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.3)
+    rng = np.random.default_rng(2)
+    state.u_values[:] += 0.5 * rng.random(state.arrays.nv)
+    state.v_values[:] = 0.3 * rng.random(state.arrays.nv)  # far from a minimiser: H indefinite
+    newton = NewtonSolver(state)
+    crack = state.crack_set()
+    _, _, _, gradient, held = newton._factorise(crack)
+    residual = np.where(held, 0.0, -gradient)
+    found = newton.negative_curvature(residual, newton._apply_inverse(residual))
+    assert found is not None, "random (u, v) with small v should show negative curvature"
+    direction, curvature = found
+    values, cols, rowptr = map(np.asarray, newton.matrix.CSR())
+    hessian = sp.csr_matrix((values, cols, rowptr), newton.matrix.shape)
+    assert curvature < 0
+    assert direction @ hessian @ direction == pytest.approx(curvature, rel=1e-8)
+    assert not np.any(direction[held])
+
+
+def test_newton_leaves_saddles_and_breaks_with_converged_alternating_minimization(tmp_path):
+    # On the obtuse-line mesh a Newton step from an alternating-minimisation iterate near a
+    # saddle lands on another branch (the body broke at 0.46 instead of 0.50) unless the
+    # negative curvature there is found and followed.
+    scene = load_scene("obtuse-line")
+    times = np.round(np.arange(0.0, 0.561, 0.02), 10)
+    runs = {}
+    for solver, tol in (("am", 1e-6), ("newton", 1e-3)):
+        parameters, _ = scene.configure(
+            overrides={"nonlinear": solver, "am_tol": tol, "am_max_iter": 20000}
+        )
+        runs[solver] = run(scene, parameters, times, tmp_path / solver)
+    newton, plain = runs["newton"], runs["am"]
+    assert newton.summary["fracture_time"] == plain.summary["fracture_time"] == 0.5
+    assert sum(r["escapes"] for r in newton.records) > 0
+    for ours, converged in zip(newton.records, plain.records, strict=True):
+        assert ours["converged"] and converged["converged"]
+        assert ours["total"] == pytest.approx(converged["total"], rel=1e-4)
