@@ -9,8 +9,9 @@ Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ f
 ``nonlinear`` selects how the iterates are formed, all with the same stopping test on an
 alternating-minimisation iteration: plain (the paper), over-relaxed or Anderson-accelerated
 (:class:`Accelerator`, with an energy safeguard), and with ``newton``/``anderson-newton`` a
-Newton step on the coupled system (:class:`ngat.newton.NewtonSolver`) after every iteration
-once ‖v^n − v^{n−1}‖_∞ < ``newton_switch``.
+Newton step on the coupled system (:class:`ngat.newton.NewtonSolver`, or a step along negative
+curvature) after an iteration with ‖v^n − v^{n−1}‖_∞ < ``newton_switch`` whose rate predicts
+more than ``NEWTON_COST`` further iterations (:func:`remaining_iterations`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = [
     "Accelerator",
     "estimate",
     "ConvergenceError",
+    "remaining_iterations",
 ]
 
 log = logging.getLogger(__name__)

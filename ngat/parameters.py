@@ -122,9 +122,10 @@ class SolverParameters:
         ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
         accelerated steps fall back to the plain one whenever it has lower energy;
         ``"newton"``: alternating minimisation until ‖v^n − v^{n−1}‖_∞ < ``newton_switch``,
-        then a Newton step on the coupled system with an energy line search after each
-        iteration (:mod:`ngat.newton`); or ``"anderson-newton"``: the same with Anderson
-        acceleration of the iterations.
+        then, after each iteration whose rate predicts more than two iterations to go, a
+        Newton step on the coupled system with an energy line search, or a step along negative
+        curvature where a Lanczos search finds some (:mod:`ngat.newton`); or
+        ``"anderson-newton"``: the same with Anderson acceleration of the iterations.
     omega
         Over-relaxation factor ω.
     anderson_depth
@@ -143,7 +144,7 @@ class SolverParameters:
     am_max_iter: int = 1000
     max_cg: int = 0
     linear_solver: str = "direct"
-    nonlinear: str = "am"
+    nonlinear: str = "newton"
     omega: float = 1.5
     anderson_depth: int = 5
     newton_switch: float = 0.1
@@ -284,6 +285,12 @@ class Parameters:
         """Check every group; raise :class:`ParameterError` naming the first invalid value."""
         for group in self._groups().values():
             group.check()
+        if not self.model.lumping and "newton" in self.solver.nonlinear:
+            raise ParameterError(
+                f"nonlinear={self.solver.nonlinear} needs lumping=true: its Hessian is that of "
+                "the lumped functional (eq. 7); with lumping=false set nonlinear=am, "
+                "overrelaxed or anderson"
+            )
 
     def flat(self) -> dict[str, Any]:
         """Return all parameters as one flat dictionary (for summaries and sweep tables)."""

@@ -77,13 +77,14 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
 
     changes, times = CASES[case]
     scene = load_scene(CASE_SCENES.get(case, "two-slits"))
-    parameters, _ = scene.configure(quick=True, overrides={"nonlinear": method, **changes})
     begin = time.perf_counter()
 
     def on_step(record: dict) -> None:
         progress.value = record["t"]
 
     try:
+        overrides = {"nonlinear": method, **changes}
+        parameters, _ = scene.configure(quick=True, overrides=overrides)
         result = run(scene, parameters, times, Path(tempfile.mkdtemp()) / "run", on_step=on_step)
         records = result.records
         status = "converged" if all(r["converged"] for r in records) else "not converged"
@@ -140,7 +141,11 @@ def convert(row: dict) -> dict:
 
 
 def draw(rows: list[dict], path: Path) -> None:
-    """Draw the colour table: green converged, yellow not converged, red failed or timeout."""
+    """Draw the colour table of the cells.
+
+    Green converged, yellow not converged, red failed or timeout, grey refused (a parameter
+    combination the solver rejects, such as Newton without lumping).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -158,6 +163,8 @@ def draw(rows: list[dict], path: Path) -> None:
             status = row["status"]
             face = colour.get(status, "#f0027f")
             text = status if not status.startswith("failed") else "failed"
+            if status.startswith("failed: ParameterError"):
+                face, text = "#cccccc", "refused\n(invalid setting)"
             if "linear_solves" in row:
                 text += f"\n{row['linear_solves']} solves, {row['wall_s']:.0f} s"
             elif status == "timeout" and row.get("reached_t", -1) >= 0:

@@ -1,8 +1,11 @@
 """End-to-end regression: the quick two-slits run against stored values.
 
-Stored from ``ngat run two-slits --quick`` (commit of the adaptivity issue). Energies are
-deterministic up to round-off on a fixed mesh sequence; the tolerances (0.1 % in energy, 5 % in
-elements) allow a different BLAS but catch a change of the model, the estimators or the marking.
+Stored from ``ngat run two-slits --quick`` with the default solver ``newton`` (issue 6; the
+values of plain ``am`` differ at t = 1.3 by 0.4 % in the split of the energy between bulk and
+surface, with the total equal to 1e−6: both stop at ‖Δv‖∞ < 1e−3 before the split has settled,
+and with am_tol = 1e−5 both give bulk 4.13932, surface 0.41236). Energies are deterministic up to
+round-off on a fixed mesh sequence; the tolerances (0.1 % in energy, 5 % in elements) allow a
+different BLAS but catch a change of the model, the estimators or the marking.
 """
 
 import numpy as np
@@ -10,12 +13,12 @@ import pytest
 
 STORED = {
     # t: (bulk, surface, total, elements)
-    0.5: (0.7067190169183803, 0.005363996245071561, 0.7120830131634519, 2007),
-    1.0: (2.6748129915818915, 0.09598745078753881, 2.7708004423694303, 6439),
-    1.3: (4.145692858784631, 0.4059870173485212, 4.551679876133153, 12563),
+    0.5: (0.7067190169183801, 0.005363996245071582, 0.7120830131634517, 2007),
+    1.0: (2.674742445625733, 0.09605791030652241, 2.770800355932255, 6439),
+    1.3: (4.143884889177341, 0.4077908542495483, 4.551675743426889, 12563),
 }
 FRACTURE_TIME = 1.45
-FINAL_ELEMENTS = 31653
+FINAL_ELEMENTS = 31301
 
 
 @pytest.mark.parametrize("t", sorted(STORED))

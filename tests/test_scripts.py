@@ -22,3 +22,17 @@ def test_stability_quick(tmp_path):
     totals = [float(r["total"]) for r in rows]
     assert abs(totals[0] / totals[1] - 1) < 1e-2
     assert (tmp_path / "stability.png").stat().st_size > 10_000
+
+
+def test_stability_cell_with_a_refused_setting_reports_the_error(tmp_path):
+    # Newton refuses lumping=false while configuring: the cell must say so, not hang.
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "stability.py"), "--out", str(tmp_path),
+            "--methods", "newton", "--cases", "obtuse mesh (sheared), consistent mass",
+            "--limit", "60",
+        ],
+        check=True, capture_output=True, timeout=120,
+    )  # fmt: skip
+    (row,) = csv.DictReader(open(tmp_path / "stability.csv"))
+    assert row["status"].startswith("failed: ParameterError: nonlinear=newton needs lumping=true")

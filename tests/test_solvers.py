@@ -11,6 +11,7 @@ import scipy.sparse as sp
 from ngsolve import H1, GridFunction
 
 from ngat.driver import run
+from ngat.minimization import remaining_iterations
 from ngat.newton import NewtonSolver, energy_form
 from ngat.parameters import NONLINEAR_SOLVERS
 from ngat.scene import load_scene
@@ -156,3 +157,11 @@ def test_newton_leaves_saddles_and_breaks_with_converged_alternating_minimizatio
     for ours, converged in zip(newton.records, plain.records, strict=True):
         assert ours["converged"] and converged["converged"]
         assert ours["total"] == pytest.approx(converged["total"], rel=5e-4)
+
+
+def test_remaining_iterations_of_a_linearly_converging_iteration():
+    # Changes 0.1, 0.05, 0.025, ...: from 0.05 down to 1e-3 takes log2(50) = 5.64 more halvings.
+    assert remaining_iterations(0.05, 0.1, 1e-3) == pytest.approx(np.log2(50))
+    assert remaining_iterations(0.05, 0.04, 1e-3) == np.inf  # not contracting (near a saddle)
+    assert remaining_iterations(0.05, np.inf, 1e-3) == 0.0  # no rate yet
+    assert remaining_iterations(1e-4, 1e-3, 1e-3) == 0.0
