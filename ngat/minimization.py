@@ -46,6 +46,13 @@ HalfStepMonitor = Callable[[str, ATState], None]
 _newton_solvers: weakref.WeakKeyDictionary[ATState, NewtonSolver] = weakref.WeakKeyDictionary()
 """One Newton solver per state, so that its graph and factorisation outlive a load step."""
 
+NEWTON_COST = 2
+"""Alternating-minimisation iterations that a Newton attempt costs: its factorisation of the
+coupled 2n × 2n system is about three half-step factorisations (1.5 iterations), and the up to
+ten back-solves of the search for negative curvature cost about an eighth of a factorisation
+each (0.13 s against 1.05 s at 122k vertices). Newton is tried only where more alternating
+minimisation iterations than this remain."""
+
 
 class ConvergenceError(RuntimeError):
     """The alternating minimisation produced NaN/Inf."""
@@ -283,14 +290,6 @@ def alternating_minimization(
     result.cg_max_iterations = max(cg_counts, default=0)
     result.cg_not_converged = state.cg_not_converged - cg_before[1]
     return result
-
-
-NEWTON_COST = 2
-"""Alternating-minimisation iterations that a Newton attempt costs: its factorisation of the
-coupled 2n × 2n system is about three half-step factorisations (1.5 iterations), and the up to
-ten back-solves of the search for negative curvature cost about an eighth of a factorisation
-each (0.13 s against 1.05 s at 122k vertices). Newton is tried only where more alternating
-minimisation iterations than this remain."""
 
 
 def remaining_iterations(change: float, previous: float, tol: float) -> float:

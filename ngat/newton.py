@@ -17,10 +17,11 @@ the Hessian may be indefinite and δ no descent direction: the step is then reje
 caller continues with alternating minimisation, so Newton starts from an
 alternating-minimisation iterate (:func:`ngat.minimization.alternating_minimization`).
 
-Newton converges to saddles of I_j as readily as to minimisers, and the quasi-static path
-passes near saddles exactly where the crack is about to move. Where the iteration would stop,
-:meth:`NewtonSolver.escape_saddle` therefore looks for negative curvature with a few Lanczos
-steps on H⁻¹ and, if it finds some, steps along it and lets the iteration go on.
+Newton is attracted by saddles of I_j as much as by minimisers, and the quasi-static path
+passes near saddles exactly where the crack is about to move. Before a Newton step,
+:meth:`NewtonSolver.negative_curvature` therefore looks for negative curvature with a few
+Lanczos steps on H⁻¹ and, if it finds some, the step follows it instead (as alternating
+minimisation, a descent method, eventually does).
 """
 
 from __future__ import annotations
@@ -265,14 +266,15 @@ class NewtonSolver:
         self.certified = 0.0
         if found is not None:
             direction, curvature = found
-            if np.dot(gradient, direction) > 0:
-                direction = -direction
-            factor = self.escape_size / max(np.max(np.abs(direction[len(u) :])), 1e-300)
+            # Downhill to first order, scaled to ‖d_v‖∞ = escape_size.
+            slope = float(np.dot(gradient, direction))
+            factor = -np.sign(slope or -1.0) * self.escape_size
+            factor /= max(np.max(np.abs(direction[len(u) :])), 1e-300)
             self.escapes += 1
             log.debug("negative curvature %.3g: stepping along it", curvature)
             return self._line_search(
-                u, v, factor * direction, factor * float(np.dot(gradient, direction)),
-                curvature * factor**2, crack, upper, ceiling,
+                u, v, factor * direction, factor * slope, curvature * factor**2, crack, upper,
+                ceiling,
             ) > 0  # fmt: skip
         slope = float(np.dot(gradient, delta))
         if not slope < 0:
