@@ -265,13 +265,13 @@ def alternating_minimization(
         if newton and change < newton_below and remaining > NEWTON_COST:
             previous_change = np.inf  # the next ratio would measure the Newton step
             ceiling = accelerator.plain_energy if accelerator and accelerator.has_plain else np.inf
-            escapes = newton.escapes
-            if newton.step(state.crack_set(), ceiling):
+            outcome = newton.step(state.crack_set(), ceiling)
+            if outcome:
                 result.energies.append(state.energies()["total"])
                 if accelerator:
                     accelerator.restart()
-                result.newton_steps += newton.escapes == escapes
-                result.escapes += newton.escapes - escapes
+                result.newton_steps += outcome == "newton"
+                result.escapes += outcome == "escape"
             else:
                 # Too far from a minimiser for Newton: wait until the iteration has halved.
                 result.fallbacks += 1

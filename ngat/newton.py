@@ -80,8 +80,6 @@ class NewtonSolver:
 
     Attributes
     ----------
-    escapes : int
-        Steps taken along negative curvature so far.
     certified : float
         ‖δ_v‖∞ of the last full Newton step from a point without negative curvature; a
         shorter next step skips the search (0 when there is none).
@@ -105,7 +103,6 @@ class NewtonSolver:
         self.max_halvings = max_halvings
         self.lanczos_steps = lanczos_steps
         self.escape_size = escape_size
-        self.escapes = 0
         self.certified = 0.0
         self._arrays = None
 
@@ -229,7 +226,7 @@ class NewtonSolver:
                 self.inverse.Update()
         return u, v, upper, gradient, held
 
-    def step(self, crack: np.ndarray, ceiling: float = np.inf) -> bool:
+    def step(self, crack: np.ndarray, ceiling: float = np.inf) -> str:
         """Try one Newton step from the state's (u, v); return whether the state moved.
 
         If a few Lanczos steps find negative curvature of I_j, the step goes along that
@@ -248,14 +245,15 @@ class NewtonSolver:
 
         Returns
         -------
-        bool
-            ``True`` if the state now holds the new iterate, ``False`` if the direction was
-            not a descent direction or no step length decreased I_j (the state is unchanged).
+        str
+            ``"newton"`` or ``"escape"`` (a step along negative curvature) if the state now
+            holds the new iterate; ``""`` if the direction was not a descent direction or no
+            step length decreased I_j (the state is unchanged).
         """
         u, v, upper, gradient, held = self._factorise(crack)
         residual = np.where(held, 0.0, -gradient)
         if not np.any(residual):
-            return False
+            return ""
         with self.state.timer("solve"):
             delta = self._apply_inverse(residual)
             self.state.linear_solves += 1
@@ -270,22 +268,22 @@ class NewtonSolver:
             slope = float(np.dot(gradient, direction))
             factor = -np.sign(slope or -1.0) * self.escape_size
             factor /= max(np.max(np.abs(direction[len(u) :])), 1e-300)
-            self.escapes += 1
             log.debug("negative curvature %.3g: stepping along it", curvature)
-            return self._line_search(
+            accepted = self._line_search(
                 u, v, factor * direction, factor * slope, curvature * factor**2, crack, upper,
                 ceiling,
-            ) > 0  # fmt: skip
+            )  # fmt: skip
+            return "escape" if accepted else ""
         slope = float(np.dot(gradient, delta))
         if not slope < 0:
             log.debug("Newton direction is not a descent direction (∇I·δ = %.3g)", slope)
-            return False
+            return ""
         scale = self._line_search(u, v, delta, slope, 0.0, crack, upper, ceiling)
         if scale == 1:
             # A full step from a point without negative curvature: while the next steps are
             # shorter (Newton's local convergence), they need no new check.
             self.certified = size
-        return scale > 0
+        return "newton" if scale else ""
 
     def restart(self) -> None:
         """Forget the last check for negative curvature (a new load step begins)."""
