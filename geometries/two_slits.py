@@ -31,5 +31,5 @@ scene = Scene(
     slits=SLITS,
     times=np.round(0.01 * np.arange(161), 10),
     # --quick: every fifth load step, a coarser start and a coarser element floor.
-    quick={"times": np.round(np.arange(0.0, 1.61, 0.05), 10), "maxh": 0.5, "h_floor": 0.004},
+    quick={"times": np.round(np.arange(0.0, 1.61, 0.05), 10), "maxh": 0.5, "floor": 0.08},
 )

@@ -135,7 +135,7 @@ class Diagnostics:
                 "eps-under-resolved",
                 h_zone >= eps,
                 f"elements up to h = {h_zone:.3g} ≥ ε = {eps:.3g} {where}: refine "
-                "(smaller tol or h_floor) or increase eps",
+                "(adapt=band, or a smaller tol or floor) or increase eps",
             )
         )
         for kind, fired, message in checks:

@@ -20,6 +20,7 @@ import ngsolve
 import numpy as np
 
 from ngat import __version__
+from ngat.band import CrackBand
 from ngat.checkpoint import (
     prepare_resume,
     remove_checkpoint,
@@ -80,6 +81,14 @@ def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
     if len(regions) >= 2:
         measures["connected"] = connects(state.arrays, state.v_values, regions[0], regions[1])
     return measures
+
+
+def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
+    """Return the crack band of ``adapt="band"`` (:mod:`ngat.band`), else ``None``."""
+    adaptivity, eps = parameters.adaptivity, parameters.model.eps
+    if adaptivity.adapt != "band":
+        return None
+    return CrackBand(eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps)
 
 
 def run(
@@ -157,15 +166,17 @@ def run(
             restore_state(state, checkpoint)
             result.records.extend(checkpoint.records)
         result.state = state
+        band = crack_band(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
         for k, t in enumerate(times):
             if k < len(result.records):
                 continue
             begin = time.perf_counter()
             state.apply_load(float(t))
+            predicted = band.refine(state) if band else 0
             try:
                 step = alternating_minimization(
-                    state, parameters.solver, parameters.adaptivity, monitor
+                    state, parameters.solver, parameters.adaptivity, monitor, band
                 )
             except ConvergenceError as error:
                 diagnostics.report("nan", str(error), k, float(t), raise_now=False)
@@ -175,7 +186,8 @@ def run(
             record.update(
                 am_iterations=step.iterations,
                 converged=step.converged,
-                refinements=step.refinements,
+                refinements=step.refinements + predicted,
+                band_refinements=step.band_refinements + predicted,
                 mu=float(np.sqrt(estimate(state, "u", crack).sum())),
                 nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),

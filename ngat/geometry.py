@@ -16,6 +16,8 @@ import ngsolve
 import numpy as np
 from netgen.occ import Glue, OCCGeometry, Rectangle, WorkPlane
 
+from ngat.state import SceneError
+
 __all__ = ["polygon_face", "rectangle", "glue", "generate_mesh", "split_slit_mouths"]
 
 
@@ -29,6 +31,12 @@ def polygon_face(points: Sequence[tuple[float, float]], name: str):
     name
         Material name of the face.
     """
+    xy = np.asarray(points, dtype=float)
+    signed_area = np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+    if signed_area < 0:
+        # OCC fails to triangulate some clockwise faces with slits (and Netgen then drops the
+        # face without an error): always run counter-clockwise.
+        points = [points[0], *points[:0:-1]]
     wp = WorkPlane().MoveTo(*points[0])
     for p in points[1:]:
         wp.LineTo(*p)
@@ -63,10 +71,22 @@ def generate_mesh(shape, maxh: float) -> ngsolve.Mesh:
     -------
     ngsolve.Mesh
         Mesh whose slits have distinct nodes on both faces, mouths included.
+
+    Raises
+    ------
+    SceneError
+        If a face of the shape got no elements.
     """
     ngmesh = OCCGeometry(shape, dim=2).GenerateMesh(maxh=maxh)
     split_slit_mouths(ngmesh)
-    return ngsolve.Mesh(ngmesh)
+    mesh = ngsolve.Mesh(ngmesh)
+    missing = sorted({face.name for face in shape.faces} - set(mesh.GetMaterials()))
+    if missing:
+        raise SceneError(
+            f"Netgen left the face(s) {', '.join(missing)} without elements: check that their "
+            "outline does not cross itself"
+        )
+    return mesh
 
 
 def _fan_components(elements: np.ndarray, around: np.ndarray, cut: set) -> list[list[int]]:

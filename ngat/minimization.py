@@ -4,7 +4,9 @@ Algorithm 1 of the paper minimises I_j in u with v frozen, then in v with u froz
 ‖v^n − v^{n−1}‖_∞ < ``am_tol``; I_j never increases from one half-step to the next (proof of
 Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ for the u-step,
 ν for the v-step, Proposition 4), mark, refine, until the estimator is ≤ TOL. The variant
-``"after"`` runs Algorithm 1 to convergence first and refines only then.
+``"after"`` runs Algorithm 1 to convergence first and refines only then. The default ``"band"``
+is Algorithm 2 with the crack band resolved after every v-step (:class:`ngat.band.CrackBand`):
+an iteration that refined the band does not count as converged.
 
 ``nonlinear`` selects how the iterates are formed, all with the same stopping test on an
 alternating-minimisation iteration: plain (the paper), over-relaxed or Anderson-accelerated
@@ -24,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from ngsolve import GridFunction
 
+from ngat.band import CrackBand
 from ngat.estimators import mu_estimator, nu_estimator
 from ngat.newton import NewtonSolver
 from ngat.parameters import AdaptivityParameters, SolverParameters
@@ -37,6 +40,7 @@ __all__ = [
     "estimate",
     "ConvergenceError",
     "remaining_iterations",
+    "tolerance",
 ]
 
 log = logging.getLogger(__name__)
@@ -52,6 +56,10 @@ coupled 2n × 2n system is about three half-step factorisations (1.5 iterations)
 ten back-solves of the search for negative curvature cost about an eighth of a factorisation
 each (0.13 s against 1.05 s at 122k vertices). Newton is tried only where more alternating
 minimisation iterations than this remain."""
+
+
+ROUND_OFF_TOL = 1e-6
+"""Smallest TOL of the relative form: estimators of fields that are round-off are not refined."""
 
 
 class ConvergenceError(RuntimeError):
@@ -72,6 +80,8 @@ class StepResult:
         The last ‖v^n − v^{n−1}‖_∞.
     refinements
         Number of mesh refinements during the step.
+    band_refinements
+        Those of them that resolved the crack band (:class:`ngat.band.CrackBand`).
     history
         One entry per refinement: iteration, half-step, elements, estimator before refining.
     energies
@@ -105,6 +115,7 @@ class StepResult:
     converged: bool = False
     change: float = np.inf
     refinements: int = 0
+    band_refinements: int = 0
     history: list[dict] = field(default_factory=list)
     energies: list[float] = field(default_factory=list)
     energy_increases: int = 0
@@ -133,6 +144,19 @@ def estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
         )
 
 
+def tolerance(state: ATState, adaptivity: AdaptivityParameters) -> float:
+    """Return TOL_n for μ and ν: ``tol`` (Algorithm 2), or ``tol_rel`` · I_j(u, v)^{1/2} (band).
+
+    μ and ν bound the residuals in the dual of the energy norm, and I_j^{1/2} is the size of
+    (u, v) in that norm: the relative form means the same when the load, the domain or ε
+    change (the absolute TOL = 0.3 of the paper is 0.18 I_j^{1/2} at t = 1 of its example).
+    Without load, I_j is round-off and so are μ and ν: TOL is never below ``ROUND_OFF_TOL``.
+    """
+    if adaptivity.adapt != "band":
+        return adaptivity.tol
+    return max(adaptivity.tol_rel * float(np.sqrt(state.energies()["total"])), ROUND_OFF_TOL)
+
+
 def _refine_by(
     state: ATState,
     indicators: list[np.ndarray],
@@ -146,12 +170,13 @@ def _refine_by(
     and refining stops once the estimator restricted to them is ≤ TOL: the rest of the
     estimate sits at the floor, where refinement cannot reduce it.
     """
-    allowed = refinable(state, adaptivity.h_floor)
+    allowed = refinable(state, adaptivity.floor * state.model.eps)
+    tol = tolerance(state, adaptivity)
     marked = np.zeros(state.arrays.ne, dtype=bool)
     values = []
     for eta_sq in indicators:
         values.append(float(np.sqrt(eta_sq.sum())))
-        if values[-1] > adaptivity.tol and np.sqrt(eta_sq[allowed].sum()) > adaptivity.tol:
+        if values[-1] > tol and np.sqrt(eta_sq[allowed].sum()) > tol:
             marked |= mark(np.where(allowed, eta_sq, 0.0), adaptivity.marking, adaptivity.theta)
     elements = state.arrays.ne
     if result.refinements >= adaptivity.max_refinements or not refine(state, marked):
@@ -174,7 +199,7 @@ def _half_step(
             state.solve_u()
         else:
             state.solve_v(crack)
-        if adaptivity.adapt != "paper":
+        if adaptivity.adapt not in ("paper", "band"):
             return
         if not _refine_by(state, [estimate(state, stage, crack)], adaptivity, result, stage):
             return
@@ -192,6 +217,7 @@ def alternating_minimization(
     solver: SolverParameters,
     adaptivity: AdaptivityParameters,
     monitor: HalfStepMonitor | None = None,
+    band: CrackBand | None = None,
 ) -> StepResult:
     """Run Algorithm 1 or 2 from the current (u, v), with v = 0 on CR(t_k).
 
@@ -206,6 +232,8 @@ def alternating_minimization(
         Refinement variant (``paper``, ``after``, ``fixed``), TOL, marking, element floor.
     monitor
         Called as ``monitor("u", state)`` and ``monitor("v", state)`` after each half-step.
+    band
+        With ``adapt="band"``: the crack band, resolved after every v-step.
 
     Returns
     -------
@@ -241,6 +269,14 @@ def alternating_minimization(
         _half_step(state, "v", adaptivity, result)
         if monitor:
             monitor("v", state)
+        band_rounds = band.refine(state) if band else 0
+        if band_rounds:
+            result.band_refinements += band_rounds
+            result.refinements += band_rounds
+            result.history.append(
+                {"iteration": result.iterations, "stage": "band", "elements": elements,
+                 "estimate": 0.0, "new_elements": state.arrays.ne}
+            )  # fmt: skip
         energy = state.energies()["total"]
         if accelerator:
             accelerator.step(state)
@@ -254,7 +290,7 @@ def alternating_minimization(
             raise ConvergenceError(
                 f"the alternating minimisation produced NaN/Inf at iteration {result.iterations}"
             )
-        if change < solver.am_tol:
+        if change < solver.am_tol and not band_rounds:
             if adaptivity.adapt == "after" and _refine_after(state, adaptivity, result):
                 continue
             result.converged = True

@@ -175,6 +175,10 @@ class SolverParameters:
             raise ParameterError(f"on_problem must be warn or error, got {self.on_problem!r}")
 
 
+ADAPT_VARIANTS = ("band", "paper", "after", "fixed")
+"""The adaptivity variants (:func:`ngat.minimization.alternating_minimization`)."""
+
+
 @dataclass(frozen=True)
 class AdaptivityParameters:
     """Mesh: initial size and refinement (paper, Algorithm 2).
@@ -184,43 +188,65 @@ class AdaptivityParameters:
     maxh
         Initial mesh size.
     adapt
-        ``"paper"``: refine inside each half-step until μ ≤ tol and ν ≤ tol (Algorithm 2);
-        ``"after"``: refine only after the alternating minimisation has converged at a load
-        step, then repeat it; ``"fixed"``: no refinement (Algorithm 1).
+        ``"band"``: Algorithm 2 and, on top of it, the crack band resolved to ``band_h · ε``
+        wherever the crack is or is about to be, before each step and after every v-step
+        (:mod:`ngat.band`); ``"paper"``: refine inside each half-step until μ ≤ tol and
+        ν ≤ tol (Algorithm 2 alone); ``"after"``: refine only after the alternating
+        minimisation has converged at a load step, then repeat it;
+        ``"fixed"``: no refinement (Algorithm 1).
     tol
-        Tolerance TOL_n for μ and ν.
+        Tolerance TOL_n for μ and ν (``adapt="paper"`` and ``"after"``; the paper's 0.3).
+    tol_rel
+        Relative tolerance of ``adapt="band"``: TOL_n = tol_rel · I_j(u, v)^{1/2}
+        (:func:`ngat.minimization.tolerance`).
     theta
         Marking parameter θ.
     marking
         ``"dorfler"`` (bulk) or ``"maximum"``.
-    h_floor
-        Elements with diameter ≤ h_floor are never refined (see :func:`ngat.refinement.refine`).
+    band_h
+        Target element diameter in the crack band, in units of ε (``adapt="band"``): with the
+        default ε/4 a crack band costs G_eff ≤ 1.065 per unit length (:mod:`ngat.band`).
+    floor
+        Element floor in units of ε: elements are bisected only while their children stay
+        at least ``floor · ε`` wide (:func:`ngat.refinement.refinable`); the default is the
+        paper's smallest element, 1e−3 at its ε = 0.05.
     max_refinements
         Limit of refinements per load step.
     """
 
     maxh: float = 0.25
-    adapt: str = "paper"
+    adapt: str = "band"
     tol: float = 0.3
+    tol_rel: float = 0.18
     theta: float = 0.5
     marking: str = "dorfler"
-    h_floor: float = 1e-3
+    band_h: float = 0.25
+    floor: float = 0.02
     max_refinements: int = 200
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
         if not self.maxh > 0:
             raise ParameterError(f"maxh must be positive, got maxh={self.maxh}")
-        if self.adapt not in ("paper", "after", "fixed"):
-            raise ParameterError(f"adapt must be paper, after or fixed, got adapt={self.adapt}")
+        if self.adapt not in ADAPT_VARIANTS:
+            raise ParameterError(
+                f"adapt must be one of {', '.join(ADAPT_VARIANTS)}, got adapt={self.adapt}"
+            )
         if not self.tol > 0:
             raise ParameterError(f"tol must be positive, got tol={self.tol}: choose tol > 0")
+        if not self.tol_rel > 0:
+            raise ParameterError(f"tol_rel must be positive, got tol_rel={self.tol_rel}")
         if not 0 < self.theta <= 1:
             raise ParameterError(f"theta must lie in (0, 1], got theta={self.theta}")
         if self.marking not in ("dorfler", "maximum"):
             raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
-        if not self.h_floor >= 0:
-            raise ParameterError(f"h_floor must be non-negative, got h_floor={self.h_floor}")
+        if not self.floor >= 0:
+            raise ParameterError(f"floor must be non-negative, got floor={self.floor}")
+        if not self.band_h > 2 * self.floor:
+            raise ParameterError(
+                f"band_h must exceed twice the floor, got band_h={self.band_h}, "
+                f"floor={self.floor}: the band cannot be refined below the floor"
+            )
         if not self.max_refinements >= 0:
             raise ParameterError(
                 f"max_refinements must be >= 0, got max_refinements={self.max_refinements}"

@@ -14,7 +14,7 @@ import numpy as np
 
 from ngat.state import ATState
 
-__all__ = ["dorfler_marking", "maximum_marking", "mark", "refinable", "refine"]
+__all__ = ["dorfler_marking", "maximum_marking", "mark", "refinable", "refine", "bisect", "rebuild"]
 
 log = logging.getLogger(__name__)
 
@@ -58,10 +58,42 @@ def refinable(state: ATState, h_floor: float) -> np.ndarray:
     a crack forms, the jump of u concentrates in the thinnest element layer of the fresh crack
     band (η is tiny), so the indicators there do not shrink under refinement and Algorithm 2
     would bisect the same spot down to 1e−5. An element is therefore bisected only while its
-    children stay at least ``h_floor`` wide (default 1e−3, the paper's smallest element);
+    children stay at least ``h_floor`` wide (default ε/50: 1e−3, the paper's smallest element,
+    at its ε = 0.05);
     conformity closure may still bisect a neighbour below the floor, by at most a factor 2.
     """
     return state.arrays.diameter > 2 * h_floor
+
+
+def bisect(state: ATState, marked: np.ndarray) -> int:
+    """Bisect the marked elements (``mesh.Refine()``) without rebuilding the state's operators.
+
+    The P1 fields are prolongated; call :meth:`ngat.state.ATState.mesh_changed` (or use
+    :func:`refine`) before solving on the new mesh. Several bisections in a row therefore cost
+    one rebuild.
+
+    Returns
+    -------
+    int
+        Number of elements marked (0: mesh unchanged).
+    """
+    count = int(marked.sum())
+    if count == 0:
+        return 0
+    with state.timer("refine"):
+        state.mesh.SetRefinementFlags(marked.tolist())
+        state.mesh.Refine()
+    state.refinements.append(np.flatnonzero(marked))
+    return count
+
+
+def rebuild(state: ATState) -> None:
+    """Rebuild the state's operators after :func:`bisect` and set g(t_k) on the new Ω_D vertices.
+
+    The new vertices of Ω_D take g(t_k) itself, not the interpolant of the coarser mesh.
+    """
+    state.mesh_changed()
+    state.apply_load(state.t.Get())
 
 
 def refine(state: ATState, marked: np.ndarray) -> int:
@@ -79,12 +111,7 @@ def refine(state: ATState, marked: np.ndarray) -> int:
     int
         Number of elements marked (0: mesh unchanged).
     """
-    count = int(marked.sum())
-    if count == 0:
-        return 0
-    with state.timer("refine"):
-        state.mesh.SetRefinementFlags(marked.tolist())
-        state.mesh.Refine()
-    state.refinements.append(np.flatnonzero(marked))
-    state.mesh_changed()
+    count = bisect(state, marked)
+    if count:
+        rebuild(state)
     return count

@@ -406,9 +406,17 @@ class ATState:
         return forces
 
     def mesh_measures(self) -> dict[str, float]:
-        """Return element and vertex counts, element diameters and the range of v."""
+        """Return element and vertex counts, element diameters, the range of v and ``h_crack``.
+
+        ``h_crack`` is the size of the elements meeting the crack {v < 0.1}: sqrt(2 |T|) of their
+        mean area (the leg of a right isosceles triangle of that area, the spacing of its node
+        lines), the h of the crack's discrete toughness G_eff(h); 0 without a crack.
+        """
         v = self.v_values
+        cracked = (v[self.arrays.elements] < 0.1).any(axis=1)
+        h_crack = np.sqrt(2 * self.arrays.area[cracked].mean()) if cracked.any() else 0.0
         return {
+            "h_crack": float(h_crack),
             "elements": self.arrays.ne,
             "vertices": self.arrays.nv,
             "h_min": float(self.arrays.diameter.min()),

@@ -16,7 +16,10 @@ status (converged, not converged, failed with the error, timeout and the load ti
 iterations, linear solves, Newton steps, steps along negative curvature and the extra solves
 that found it, rejected accelerated or Newton steps, CG iterations
 (total and most per solve; 0 with the direct solver), final total energy, min/max v, fracture
-time, the diagnostics, the wall time and the time in linear solves.
+time, the diagnostics, the wall time and the time in linear solves. Every finished cell is
+also judged against the reference (:func:`judge`): a run that converged to the wrong fracture
+time or energy is a failure and is coloured so. Columns are the solvers with the default
+adaptivity (``band``) and ``newton/paper``, the default solver with Algorithm 2 alone.
 
 Output in ``--out`` (default ``results/stability``): ``stability.csv`` and ``stability.png``
 (a colour table). ``--quick`` runs two cells only (used by the tests).
@@ -55,6 +58,8 @@ CASES = {
     "CG+h1amg η=1e-3": ({"linear_solver": "cg-h1amg", "eta": 1e-3}, QUICK_TIMES),
     "CG+h1amg η=1e-5": ({"linear_solver": "cg-h1amg"}, QUICK_TIMES),
     "CG+h1amg η=1e-8": ({"linear_solver": "cg-h1amg", "eta": 1e-8}, QUICK_TIMES),
+    "ε=0.025 (defaults)": ({"eps": 0.025}, QUICK_TIMES),
+    "coarse start maxh=1.0": ({"maxh": 1.0}, QUICK_TIMES),
     "obtuse mesh (sheared)": ({}, SHEARED_TIMES),
     "obtuse mesh (sheared), no v bounds": ({"bounded_v": False}, SHEARED_TIMES),
     "obtuse mesh (sheared), no v bounds, consistent mass":
@@ -63,7 +68,15 @@ CASES = {
 }  # fmt: skip
 # Cases with their own scene (the others run two-slits).
 CASE_SCENES = {case: "obtuse-line" for case in CASES if case.startswith("obtuse mesh (sheared)")}
-METHODS = list(NONLINEAR_SOLVERS)
+METHODS = [*NONLINEAR_SOLVERS, "newton/paper"]
+"""Columns: every solver with the default adaptivity (``band``), and the default solver with
+the paper's Algorithm 2 alone (``adapt=paper``)."""
+
+
+def method_overrides(method: str) -> dict:
+    """Return the parameters of a column: ``solver`` or ``solver/adapt`` (e.g. ``newton/paper``)."""
+    solver, _, adapt = method.partition("/")
+    return {"nonlinear": solver, **({"adapt": adapt} if adapt else {})}
 
 
 def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None:
@@ -83,7 +96,7 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
         progress.value = record["t"]
 
     try:
-        overrides = {"nonlinear": method, **changes}
+        overrides = {**method_overrides(method), **changes}
         parameters, _ = scene.configure(quick=True, overrides=overrides)
         result = run(scene, parameters, times, Path(tempfile.mkdtemp()) / "run", on_step=on_step)
         records = result.records
@@ -102,6 +115,7 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
             "v_min": min(r["v_min"] for r in records),
             "v_max": max(r["v_max"] for r in records),
             "fracture_time": result.summary.get("fracture_time", ""),
+            "energy_1.0": next((r["total"] for r in records if np.isclose(r["t"], 1.0)), ""),
             "diagnostics": " ".join(sorted({p["kind"] for p in result.summary["diagnostics"]})),
             "solve_s": result.summary["timing"].get("solve", 0.0),
         }
@@ -124,7 +138,50 @@ def run_cell(method: str, case: str, limit: float) -> dict:
             "method": method, "case": case, "status": "timeout", "wall_s": limit,
             "reached_t": progress.value,
         }  # fmt: skip
-    return {"method": method, "case": case, **queue.get()}
+    row = {"method": method, "case": case, **queue.get()}
+    return {**row, **judge(row, case)}
+
+
+REFERENCE = json.loads(
+    (Path(__file__).resolve().parent.parent / "geometries/reference/two_slits.json").read_text()
+)
+OBTUSE_BREAK = 0.50
+"""obtuse-line's break time with converged alternating minimisation (am_tol 1e−4 to 1e−6)."""
+
+
+def judge(row: dict, case: str) -> dict:
+    """Score a finished cell against the reference: a converged run can still be wrong.
+
+    two-slits cells: the fracture time within one load step (and at least 0.02) of the
+    converged reference (1.39) and E(1.0) within 0.5 % of it; obtuse-line cells: the break
+    within one load step of 0.50. Returns ``fracture_error``, ``energy_error_%`` (where they
+    apply) and ``verdict``: ``right``, ``wrong: …`` or empty for cells that did not finish.
+    """
+    if row.get("status") not in ("converged", "not converged"):
+        return {"verdict": ""}
+    times = CASES[case][1]
+    tolerance = max(float(np.max(np.diff(times))), 0.02)
+    obtuse = CASE_SCENES.get(case) == "obtuse-line"
+    reference = OBTUSE_BREAK if obtuse else REFERENCE["fracture_time"]
+    fracture = row.get("fracture_time")
+    scores, wrong = {}, []
+    if fracture in ("", None):
+        wrong.append("never breaks")
+    else:
+        scores["fracture_error"] = round(fracture - reference, 4)
+        if abs(fracture - reference) > tolerance + 1e-9:
+            wrong.append(f"breaks at {fracture:g}")
+    if "eps" in CASES[case][0]:
+        # Another ε is another model: no reference; the crack must be resolved.
+        resolved = "eps-under-resolved" not in row.get("diagnostics", "")
+        return {"verdict": "right" if resolved else "wrong: ε under-resolved"}
+    if not obtuse and row.get("energy_1.0", "") != "":
+        e_ref = REFERENCE["steps"]["total"][REFERENCE["steps"]["t"].index(1.0)]
+        error = 100 * (row["energy_1.0"] / e_ref - 1)
+        scores["energy_error_%"] = round(error, 3)
+        if abs(error) > 0.5:
+            wrong.append(f"E(1.0) {error:+.2f} %")
+    return {**scores, "verdict": "wrong: " + ", ".join(wrong) if wrong else "right"}
 
 
 def convert(row: dict) -> dict:
@@ -143,8 +200,9 @@ def convert(row: dict) -> dict:
 def draw(rows: list[dict], path: Path) -> None:
     """Draw the colour table of the cells.
 
-    Green converged, yellow not converged, red failed or timeout, grey refused (a parameter
-    combination the solver rejects, such as Newton without lumping).
+    Green converged with the right answer, orange converged with a wrong one (fracture time
+    or E(1.0) off the reference, :func:`judge`), yellow not converged, red failed or timeout,
+    grey refused (a parameter combination the solver rejects, such as Newton without lumping).
     """
     import matplotlib
 
@@ -163,6 +221,8 @@ def draw(rows: list[dict], path: Path) -> None:
             status = row["status"]
             face = colour.get(status, "#f0027f")
             text = status if not status.startswith("failed") else "failed"
+            if status == "converged" and str(row.get("verdict", "")).startswith("wrong"):
+                face, text = "#fb6a4a", row["verdict"].replace(": ", "\n", 1)
             if status.startswith("failed: ParameterError"):
                 face, text = "#cccccc", "refused\n(invalid setting)"
             if "linear_solves" in row:
@@ -190,12 +250,14 @@ def main() -> None:
     parser.add_argument(
         "--resume", action="store_true", help="keep the cells already in stability.csv"
     )
-    parser.add_argument("--methods", nargs="+", default=METHODS, choices=METHODS)
+    parser.add_argument(
+        "--methods", nargs="+", default=METHODS, help="solver or solver/adapt (e.g. am/paper)"
+    )
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args()
     cells = [(m, c) for c in args.cases for m in args.methods]
     if args.quick:
-        cells = [("am", "Δt=0.1"), ("anderson", "Δt=0.1")]
+        cells = [("am/paper", "Δt=0.1"), ("anderson/paper", "Δt=0.1")]
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     if args.resume and (args.out / "stability.csv").exists():

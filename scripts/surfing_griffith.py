@@ -33,9 +33,30 @@ import numpy as np
 
 from geometries import surfing
 from ngat.driver import run
+from ngat.parameters import Parameters
 
 R = surfing.HEIGHT / 2 - surfing.FRAME
 """Distance from the pre-crack's tip to the frame."""
+
+
+MAXH_OVER_EPS = 10.0
+"""Initial mesh size of the adaptive variant, in units of ε: no element resolves ε before the
+crack band is refined (:mod:`ngat.band`)."""
+
+
+def nominal_band(eps: float) -> float:
+    """Return the node-line spacing the default crack band aims at: legs of band_h·ε/√2."""
+    return Parameters().adaptivity.band_h * eps / np.sqrt(2)
+
+
+def band_size(records: list[dict]) -> float:
+    """Return the median ``h_crack`` of the records: the crack band size an adaptive run used."""
+    return float(np.median([r["h_crack"] for r in records if r["h_crack"] > 0]))
+
+
+def adaptive_overrides(eps: float, h: float | None, overrides: dict) -> dict:
+    """Return the run's parameters: with ``h=None`` the adaptive defaults from maxh = 10ε."""
+    return overrides if h is not None else {"maxh": MAXH_OVER_EPS * eps, **overrides}
 
 
 def critical_amplitude(
@@ -46,7 +67,9 @@ def critical_amplitude(
     Parameters
     ----------
     eps, h
-        ε and the band's cell side.
+        ε and the band's cell side; ``h=None``: the adaptive defaults (``adapt=band``) from an
+        unstructured mesh with maxh = 10ε, and h the size of the crack's elements the run used
+        (:func:`band_size`).
     folder
         Results folder of the run.
     span
@@ -59,25 +82,33 @@ def critical_amplitude(
     dict
         ``a_c_sq``, ``g_eff``, ``ratio`` = A_c² / G_eff, ``wall_s`` and the run's records.
     """
-    g_eff = surfing.effective_toughness(h, eps)
-    amplitude = np.sqrt(g_eff * np.linspace(span[0], span[1], steps))
+    amplitude = np.sqrt(
+        surfing.effective_toughness(h or nominal_band(eps), eps) * np.linspace(*span, steps)
+    )
     top = float(amplitude[-1])
     # A(t) = t: amplitude A_max reached at t = ramp = A_max.
     scene = surfing.make_scene(
         amplitude=top, speed=0.0, ramp=top, eps=eps, h_band=h, times=np.round(amplitude, 12),
         band_end=surfing.CRACK_LENGTH + 0.15 * R, half_width=6 * eps, name="surfing-critical",
+        structured=h is not None,
     )  # fmt: skip
-    parameters, times = scene.configure(overrides=overrides)
+    parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
     result = run(scene, parameters, times, folder)
     records = result.records
     a_c_sq = surfing.onset([r["t"] ** 2 for r in records], [r["tip1_x"] for r in records])
+    grown = [r for r in records if r["t"] ** 2 > a_c_sq]
+    h = h or band_size(grown)
+    g_eff = surfing.effective_toughness(h, eps)
     return {
         "a_c_sq": a_c_sq,
         "g_eff": g_eff,
+        "h": h,
         "ratio": a_c_sq / g_eff,
         "wall_s": time.perf_counter() - begin,
         "records": records,
+        "elements": records[-1]["elements"],
+        "h_crack": records[-1]["h_crack"],
     }
 
 
@@ -98,13 +129,15 @@ def steady_propagation(
     Parameters
     ----------
     eps, h
-        ε and the band's cell side.
+        ε and the band's cell side; ``h=None``: the adaptive defaults (``adapt=band``) from an
+        unstructured mesh with maxh = 10ε, and h the size of the crack's elements the run used
+        (:func:`band_size`).
     folder
         Results folder of the run.
     speed
         V.
     advance_per_step
-        V Δt in units of h.
+        V Δt in units of h (of ε for the adaptive run).
     steps
         Number of load steps.
     skip
@@ -125,17 +158,18 @@ def steady_propagation(
         ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff, ``g_eff``,
         ``lead`` (crack tip − imposed tip at the end), ``wall_s`` and the run's records.
     """
-    g_eff = surfing.effective_toughness(h, eps)
-    dt = advance_per_step * h / speed
+    dt = advance_per_step * (h or eps) / speed
     times = np.round(dt * np.arange(1, steps + 1), 12)
     start = surfing.CRACK_LENGTH - lag
     scene = surfing.make_scene(
-        amplitude=np.sqrt(surfing.OVERLOAD * g_eff), speed=speed, ramp=ramp,
-        eps=eps, h_band=h, times=times, tip_start=start,
+        amplitude=np.sqrt(
+            surfing.OVERLOAD * surfing.effective_toughness(h or nominal_band(eps), eps)
+        ),
+        speed=speed, ramp=ramp, eps=eps, h_band=h, times=times, tip_start=start,
         band_end=start + speed * times[-1] + 0.25 * R, half_width=6 * eps,
-        name="surfing-steady",
+        name="surfing-steady", structured=h is not None,
     )  # fmt: skip
-    parameters, times = scene.configure(overrides=overrides)
+    parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
     records = run(scene, parameters, times, folder).records
     window = records[skip:]
@@ -143,10 +177,15 @@ def steady_propagation(
         [r["t"] for r in window], [r["tip1_x"] for r in window], [r["surface"] for r in window]
     )
     last = records[-1]
+    h = h or band_size(window)
+    g_eff = surfing.effective_toughness(h, eps)
     return {
         "speed_ratio": rates["speed"] / speed,
         "toughness_ratio": rates["toughness"] / g_eff,
         "g_eff": g_eff,
+        "h": h,
+        "elements": last["elements"],
+        "h_crack": last["h_crack"],
         "lead": last["tip1_x"] - (start + speed * last["t"]),
         "wall_s": time.perf_counter() - begin,
         "records": records,
@@ -167,20 +206,28 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=17, help="load steps of (b)")
     parser.add_argument("--skip", type=int, default=9, help="steps of (b) left out of the fit")
     parser.add_argument("--cases", nargs="+", default=None, help="R/eps:h/eps pairs, e.g. 400:1")
+    parser.add_argument(
+        "--adaptive", type=float, nargs="+", default=None, metavar="R/EPS",
+        help="adaptive runs (adapt=band defaults, unstructured mesh of maxh = 10 eps) instead",
+    )  # fmt: skip
     args = parser.parse_args()
     cases = [(R / QUICK["steady"][0], 1.0)] if args.quick else STUDY
     if args.cases:
         cases = [tuple(float(v) for v in case.split(":")) for case in args.cases]
+    if args.adaptive:
+        cases = [(ratio, None) for ratio in args.adaptive]
     rows = []
     for ratio, h_over_eps in cases:
         eps = R / ratio
-        tag = f"R{ratio:g}_h{h_over_eps:g}"
-        a = critical_amplitude(eps, h_over_eps * eps, args.out / f"critical_{tag}")
-        b = steady_propagation(
-            eps, h_over_eps * eps, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip
-        )
+        h = h_over_eps * eps if h_over_eps else None
+        tag = f"R{ratio:g}_h{h_over_eps:g}" if h else f"R{ratio:g}_adaptive"
+        a = critical_amplitude(eps, h, args.out / f"critical_{tag}")
+        b = steady_propagation(eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip)
         rows.append(
-            {"R_over_eps": ratio, "h_over_eps": h_over_eps, "g_eff": round(a["g_eff"], 5),
+            {"R_over_eps": ratio, "mesh": "structured" if h else "adaptive",
+             "h_over_eps (a)": round(a["h"] / eps, 4), "h_over_eps (b)": round(b["h"] / eps, 4),
+             "elements (a)": a["elements"], "elements (b)": b["elements"],
+             "g_eff": round(a["g_eff"], 5),
              "a_c_sq_over_g_eff": round(a["ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
              "speed_over_V": round(b["speed_ratio"], 4),
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),

@@ -15,7 +15,7 @@ def test_stability_quick(tmp_path):
         capture_output=True,
     )
     rows = list(csv.DictReader(open(tmp_path / "stability.csv")))
-    assert [r["method"] for r in rows] == ["am", "anderson"]
+    assert [r["method"] for r in rows] == ["am/paper", "anderson/paper"]
     assert all(r["status"] == "converged" for r in rows)
     # After the break the crack paths of the two solvers may differ slightly (the break is a
     # jump between critical points); the final energies (crack lengths) agree to 1 %.

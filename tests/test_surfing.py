@@ -15,7 +15,6 @@ from ngsolve import Integrate
 
 from geometries import surfing
 from ngat.parameters import ModelParameters
-from ngat.scene import load_scene
 from ngat.state import ATState
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "surfing_griffith.py"
@@ -42,9 +41,9 @@ def slit_jumps(state):
     return keys, counts, high - low
 
 
-@pytest.mark.parametrize("rounds", [0, 1])
-def test_pre_crack_is_a_true_slit_through_the_frame(rounds):
-    scene = load_scene("surfing")
+@pytest.mark.parametrize("rounds, structured", [(0, True), (1, True), (0, False)])
+def test_pre_crack_is_a_true_slit_through_the_frame(rounds, structured):
+    scene = surfing.make_scene(structured=structured)
     mesh = scene.make_mesh(0.1)
     for _ in range(rounds):
         mesh.Refine()

@@ -1,0 +1,112 @@
+"""The crack band (adapt=band): elements tied to ε at the tips and wherever the crack goes."""
+
+import numpy as np
+import pytest
+
+from ngat.band import BUFFER, DAMAGED, TIP_RADIUS, CrackBand, band_elements
+from ngat.driver import run
+from ngat.parameters import ParameterError, Parameters
+from ngat.scene import load_scene
+from ngat.state import ATState
+
+
+def test_band_elements_are_those_within_the_radius():
+    coords = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 0.0], [6.0, 0.0], [5.0, 1.0]])
+    elements = np.array([[0, 1, 2], [3, 4, 5]])
+    diameter = np.full(2, np.sqrt(2))
+    near = band_elements(coords, elements, diameter, np.array([[0.5, 0.5]]), 0.1)
+    assert near.tolist() == [True, False]
+    assert not band_elements(coords, elements, diameter, np.empty((0, 2)), 1.0).any()
+
+
+def two_slits_state(eps=0.05):
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(quick=True, overrides={"eps": eps})
+    mesh = scene.make_mesh(parameters.adaptivity.maxh)
+    state = ATState(mesh, parameters.model, scene.loads)
+    adaptivity = parameters.adaptivity
+    band = CrackBand(eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps)
+    return scene, state, band
+
+
+def test_predictor_resolves_the_slit_tips_and_nothing_far_away():
+    eps = 0.05
+    scene, state, band = two_slits_state(eps)
+    assert band.refine(state) > 0
+    arrays = state.arrays
+    centroids = arrays.coords[arrays.elements].mean(axis=1)
+    for _, tip in scene.slits:
+        near = np.linalg.norm(centroids - tip, axis=1) < TIP_RADIUS * eps
+        assert near.sum() > 100
+        assert arrays.diameter[near].max() <= band.target
+    far = np.linalg.norm(centroids - [3.0, 3.0], axis=1) > 1.0
+    assert arrays.diameter[far].max() > 10 * band.target  # the rest stays coarse
+    assert band.refine(state) == 0  # resolved: a second call does nothing
+
+
+def test_damaged_set_and_its_buffer_are_resolved():
+    eps = 0.05
+    _, state, band = two_slits_state(eps)
+    band.slits = []  # the damaged set alone
+    # A crack along y = 3 from x = 1 to 5: v = 0 there, 1 elsewhere (on the refined vertices too).
+    for _ in range(8):
+        coords = state.arrays.coords
+        line = (np.abs(coords[:, 1] - 3) < 1e-9 + 0.6 * state.arrays.diameter.max()) & (
+            np.abs(coords[:, 0] - 3) <= 2
+        )
+        state.v_values[:] = np.where(line, 0.0, 1.0)
+        if not band.refine(state):
+            break
+    arrays = state.arrays
+    damaged = arrays.coords[state.v_values < DAMAGED]
+    assert len(damaged) > 0
+    assert band.under_resolved(state) == 0
+    centroids = arrays.coords[arrays.elements].mean(axis=1)
+    from scipy.spatial import cKDTree
+
+    distance, _ = cKDTree(damaged).query(centroids)
+    assert arrays.diameter[distance < BUFFER * eps].max() <= band.target
+
+
+def test_band_parameters_are_checked():
+    with pytest.raises(ParameterError, match="band_h"):
+        Parameters().replace(band_h=0.01, floor=0.02)
+    with pytest.raises(ParameterError, match="adapt must be one of band"):
+        Parameters().replace(adapt="everywhere")
+    assert Parameters().adaptivity.adapt == "band"
+
+
+def test_a_crack_that_runs_through_coarse_elements_ends_resolved(tmp_path):
+    # two-slits at ε = 0.1 from a mesh of 5ε: at t = 1.5 the two cracks run through the body
+    # and join in one load step, through elements that were 5ε wide when the step began.
+    scene = load_scene("two-slits")
+    eps = 0.1
+    parameters, _ = scene.configure(quick=True, overrides={"eps": eps, "floor": 0.1})
+    adaptivity = parameters.adaptivity
+    band = CrackBand(eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps)
+    result = run(scene, parameters, np.array([0.0, 1.5]), tmp_path)
+    last = result.records[-1]
+    assert last["connected"] is False and last["converged"]
+    assert last["tip1_y"] > 3.9 and last["tip2_y"] < 2.1, "the cracks should have joined"
+    assert band.under_resolved(result.state) == 0
+    assert 0 < last["h_crack"] <= band.target
+    assert last["band_refinements"] > result.records[0]["band_refinements"] > 0
+
+
+def test_relative_tolerance_scales_with_the_load_like_the_estimators():
+    # μ is linear in the load on a fixed mesh with v = 1, and so is TOL = tol_rel · I_j^{1/2}:
+    # the refinement decision does not depend on the load scale.
+    from ngat.minimization import estimate, tolerance
+
+    _, state, _ = two_slits_state()
+    adaptivity = Parameters().adaptivity
+    values = []
+    for t in (0.5, 2.0):
+        state.apply_load(t)
+        state.solve_u()
+        mu = np.sqrt(estimate(state, "u", state.crack_set()).sum())
+        values.append((mu, tolerance(state, adaptivity)))
+    (mu_1, tol_1), (mu_2, tol_2) = values
+    assert mu_2 / mu_1 == pytest.approx(4.0, rel=1e-9)
+    assert tol_2 / tol_1 == pytest.approx(4.0, rel=1e-9)
+    assert tolerance(state, adaptivity.__class__(adapt="paper")) == 0.3
