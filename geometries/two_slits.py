@@ -30,6 +30,11 @@ scene = Scene(
     loads={"left": lambda t: -t, "right": lambda t: t},
     slits=SLITS,
     times=np.round(0.01 * np.arange(161), 10),
-    # --quick: every fifth load step, a coarser start and a coarser element floor.
-    quick={"times": np.round(np.arange(0.0, 1.61, 0.05), 10), "maxh": 0.5, "floor": 0.08},
+    # --quick: every fifth load step, a coarser start, a coarser element floor and crack band.
+    quick={
+        "times": np.round(np.arange(0.0, 1.61, 0.05), 10),
+        "maxh": 0.5,
+        "floor": 0.08,
+        "band_h": 0.35,
+    },
 )

@@ -1,8 +1,8 @@
 """End-to-end regression: the quick two-slits run against stored values.
 
 Stored from ``ngat run two-slits --quick`` with the default solver ``newton`` and the default
-adaptivity ``band`` (the crack band resolved to ε/4; with ``adapt=paper`` the quick run breaks
-at 1.45 instead of 1.40 and ends with 31,301 elements instead of 150,737). Energies are
+adaptivity ``band`` (the quick crack band: elements of 0.35ε; with ``adapt=paper`` the quick run
+breaks at 1.45 instead of 1.40 and ends with 31,301 elements instead of 62,649). Energies are
 deterministic up to round-off on a fixed mesh sequence; the tolerances (0.1 % in energy, 5 % in
 elements) allow a different BLAS but catch a change of the model, the estimators or the marking.
 """
@@ -12,12 +12,12 @@ import pytest
 
 STORED = {
     # t: (bulk, surface, total, elements)
-    0.5: (0.7044316293054389, 0.005438537519995694, 0.7098701668254346, 29927),
-    1.0: (2.6749170459346576, 0.09633189984187286, 2.7712489457765304, 29927),
-    1.3: (4.120641306787404, 0.4312249386124053, 4.551866245399809, 33645),
+    0.5: (0.7044117616668234, 0.005436602170320362, 0.7098483638371438, 12019),
+    1.0: (2.674956121715371, 0.096244590137321, 2.771200711852692, 12019),
+    1.3: (4.140302601112681, 0.4119320624871037, 4.552234663599784, 14873),
 }
 FRACTURE_TIME = 1.4
-FINAL_ELEMENTS = 150737
+FINAL_ELEMENTS = 62649
 
 
 @pytest.mark.parametrize("t", sorted(STORED))
