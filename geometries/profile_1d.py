@@ -2,7 +2,7 @@
 
 With no elastic energy the v-step minimises ∫ α(1 − v)² + ε|∇v|² with v = 0 on the line; the
 minimiser is v = 1 − exp(−|y|/(2ε)) and the surface energy per unit length of line tends to 1 as
-h/ε → 0 (DESIGN.md, scene 4). The mesh is structured and aligned with the line, so a v that
+h/ε → 0 (docs/design.md, scene 4). The mesh is structured and aligned with the line, so a v that
 depends only on y reduces the discrete problem exactly to 1-D. Ω_D is the lower half, g = 0.
 """
 

@@ -1,7 +1,7 @@
 """Mode-III surfing: a crack driven through a strip by a translating crack-tip field (Griffith).
 
 Ω = (0, L) × (−H/2, H/2) with the pre-crack [0, a₀] × {0}, a true slit that cuts through the
-frame Ω_D of thickness d along the outer boundary (DESIGN.md, scene 2). On Ω_D
+frame Ω_D of thickness d along the outer boundary (docs/design.md, scene 2). On Ω_D
 
     u = U(x, y, t) = A(t) · sqrt(2r/π) · sin(θ/2),   (r, θ) polar about (a₀ + V t, 0),
 
@@ -24,7 +24,7 @@ uniform-mesh run. ``structured=False`` meshes the OCC geometry instead (unstruct
 
 Sizes: L = 2, H = 1.4, d = 0.1, a₀ = 0.6, so the tip is R = 0.6 from the frame, and ε = 0.01
 (ε/R = 1/60). AT2 damages the whole body a little, which biases the Griffith measures by a
-relative amount of order ε/R (DESIGN.md); measured, A_c²/G_eff = 1.05 at R/ε = 60 and 1.003 at
+relative amount of order ε/R (docs/design.md); measured, A_c²/G_eff = 1.05 at R/ε = 60 and 1.003 at
 R/ε = 400, so the checks use a smaller ε with this geometry. The default run: A = 1.1, V = 0.2,
 t ∈ [0, 1.5] in steps of 0.025 with the amplitude ramped in over t ∈ [0, 0.25]; the imposed
 tip travels from 0.6 to 0.9 and the crack tip runs ahead of it by a steady lead.

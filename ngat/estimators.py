@@ -150,7 +150,7 @@ def mu_estimator(
     u, and the jump of the normal flux (v² + η)[∂_n u] on interior edges, the flux
     (v² + η)∂_n u itself on Neumann edges (outer boundary outside Ω̄_D and both faces of each
     slit). The paper prints the edge term as ‖(v² + η)|∇u|²‖; the flux jump is the residual's
-    (see DESIGN.md). Every integral is exact for P1 data.
+    (see docs/design.md). Every integral is exact for P1 data.
 
     "Meets": an element meets Ω_D if one of its vertices is a Dirichlet vertex, and its
     indicator is 0. Edges with both end points in Ω̄_D are left out of the edge sums; given

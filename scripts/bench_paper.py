@@ -1,7 +1,7 @@
 """Benchmark: the paper's example end to end, and where the time goes.
 
 Question: how long does ``ngat run two-slits`` (the paper's Section 3 example, 161 load steps,
-Algorithm 2, DESIGN.md scene 1) take on this machine, how is the wall time split between
+Algorithm 2, docs/design.md scene 1) take on this machine, how is the wall time split between
 assembly, linear solves, estimation, refinement and output, how much memory does it need, and
 how many alternating-minimisation iterations does it spend, in total and in the growth phase?
 

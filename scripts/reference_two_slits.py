@@ -1,7 +1,7 @@
 """Reference solution: the paper's two-slits example with a much finer adaptive resolution.
 
 Question: what are the energies, reaction force, crack tips and fracture time of ``two-slits``
-(DESIGN.md scene 1, the paper's Section 3) once the discretisation error is far below that of
+(docs/design.md scene 1, the paper's Section 3) once the discretisation error is far below that of
 the runs we compare (``scripts/work_precision.py``)? The scene is run with Algorithm 2 at a
 smaller TOL, a smaller element floor and a tighter stopping tolerance of the alternating
 minimisation than the defaults (TOL = 0.3, h_floor = 1e-3, am_tol = 1e-3); everything else

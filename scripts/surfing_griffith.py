@@ -2,7 +2,7 @@
 
 Question: does the discrete AT model of ngat crack like Griffith's theory says, with the
 effective toughness G_eff(h) = 1 + h/(4ε) + (h/ε)²/32 of a crack band one element wide
-(DESIGN.md, scene 2)? The scene is ``geometries/surfing.py``: a strip with a pre-crack whose
+(docs/design.md, scene 2)? The scene is ``geometries/surfing.py``: a strip with a pre-crack whose
 frame Ω_D carries the mode-III tip field U = A sqrt(2r/π) sin(θ/2), energy release rate G = A².
 
 (a) Critical amplitude: the tip field stays at the pre-crack's tip (V = 0) and A is ramped;

@@ -4,7 +4,7 @@ Question: for the same accuracy, how much cheaper is the adaptive method than a 
 and does the adaptive run reach the accuracy of the uniform h = 0.025 run in the total energy at
 t = 1.0 with at least 10 times less wall time (issue 5)?
 
-Scenes: ``two-slits`` (the paper's example, DESIGN.md scene 1) and ``surfing`` (scene 2, its
+Scenes: ``two-slits`` (the paper's example, docs/design.md scene 1) and ``surfing`` (scene 2, its
 default: ε = 0.01, A = 1.1, V = 0.2, from the uniform mesh of squares of side 0.1). Methods,
 each with the scene's full load history (no fewer steps for either):
 

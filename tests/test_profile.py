@@ -1,4 +1,4 @@
-"""The optimal 1-D profile (DESIGN.md scene 4): v = 1 − exp(−d/(2ε)) and unit surface energy.
+"""The optimal 1-D profile (docs/design.md scene 4): v = 1 − exp(−d/(2ε)) and unit surface energy.
 
 On the structured mesh of ``profile-1d`` a v that depends only on y reduces the lumped problem
 exactly to a 1-D lumped problem, solved here in a few lines of numpy.

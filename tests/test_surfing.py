@@ -1,4 +1,4 @@
-"""The surfing scene (DESIGN.md scene 2): a true slit through the frame, and Griffith's theory.
+"""The surfing scene (docs/design.md scene 2): a true slit through the frame, and Griffith's theory.
 
 The Griffith checks run the coarse variant of ``scripts/surfing_griffith.py`` (h = ε, R/ε = 400,
 about 75 s together): (a) with the tip field fixed at the pre-crack's tip and A ramped, the crack
