@@ -1,8 +1,9 @@
 """Command line: ``ngat run SCENE``, ``ngat scenes``.
 
 Errors in the input (unknown scene, bad parameter, unwritable folder, a scene without Dirichlet
-region) print one line naming the problem and exit with status 2; ``--debug`` shows the
-traceback instead. ``ngat run`` never replaces a run already in its results folder unless told:
+region) print one line naming the problem and exit with status 2; any other exception is a bug
+in ngat: its traceback and a request for a bug report, exit status 1. ``--debug`` raises both.
+``ngat run`` never replaces a run already in its results folder unless told:
 ``--overwrite`` starts afresh, ``--resume`` continues it.
 """
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import traceback
 from pathlib import Path
 
 from rich.console import Console
@@ -23,12 +25,24 @@ from ngat.driver import run
 from ngat.minimization import ConvergenceError
 from ngat.output import OutputError, check_results_folder
 from ngat.parameters import ParameterError
-from ngat.scene import SceneNotFound, load_scene, scene_names
+from ngat.scene import SceneNotFound, SceneTimesError, load_scene, scene_names
 from ngat.state import SceneError
 
 __all__ = ["main"]
 
-INPUT_ERRORS = (SceneNotFound, ParameterError, SceneError, OutputError, ValueError)
+INPUT_ERRORS = (
+    SceneNotFound,
+    SceneTimesError,
+    ParameterError,
+    SceneError,
+    OutputError,
+)
+"""The package's own input errors: one line and exit status 2. Anything else is a bug."""
+
+BUG_REPORT = (
+    "ngat: internal error (a bug in ngat, not in your input): please report it with the "
+    "command and the traceback above"
+)
 
 
 def parse_settings(items: list[str]) -> dict[str, str]:
@@ -155,10 +169,13 @@ def command_scenes(args: argparse.Namespace, console: Console) -> int:
 def command_plot(args: argparse.Namespace, console: Console) -> int:
     """Draw the pictures of a results folder."""
     # Imported here: matplotlib and pyvista are only needed for pictures.
-    from ngat.plotting import plot_results
+    from ngat.plotting import PlotError, plot_results
 
     zoom = tuple(args.zoom) if args.zoom else None
-    written = plot_results(args.folder, times=args.times, zoom=zoom)
+    try:
+        written = plot_results(args.folder, times=args.times, zoom=zoom)
+    except PlotError as error:
+        raise OutputError(str(error)) from None
     if not args.quiet:
         names = ", ".join(p.name for p in written)
         console.print(f"{len(written)} pictures → {args.folder}: {names}")
@@ -237,6 +254,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         console.print(f"ngat: error: {error}", markup=False, highlight=False, soft_wrap=True)
         return 2
+    except Exception:
+        if args.debug:
+            raise
+        traceback.print_exc()
+        console.print(BUG_REPORT, markup=False, highlight=False, soft_wrap=True)
+        return 1
     finally:
         logging.getLogger().removeHandler(handler)
 

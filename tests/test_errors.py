@@ -178,3 +178,23 @@ def test_overwrite_replaces_a_run_and_keeps_other_files(tmp_path):
     assert main([*args, "--overwrite"]) == 0
     assert (out / "notes.txt").read_text() == "keep me"
     assert len((out / "energies.csv").read_text().splitlines()) == 2
+
+
+def test_an_internal_error_is_reported_as_a_bug_with_its_traceback(monkeypatch, capsys, tmp_path):
+    # A ValueError from inside the package is not bad input: traceback, bug-report line, exit 1.
+    import ngat.cli
+
+    def broken(*args, **kwargs):
+        raise ValueError("an internal invariant failed")
+
+    monkeypatch.setattr(ngat.cli, "run", broken)
+    status = ngat.cli.main(
+        ["run", "profile-1d", "--quick", "--quiet", "--out", str(tmp_path / "x")]
+    )
+    err = capsys.readouterr().err
+    assert status == 1
+    assert "Traceback" in err and "an internal invariant failed" in err
+    assert "internal error (a bug in ngat" in err
+    # The package's own input errors keep the one-line treatment (exit 2).
+    assert ngat.cli.main(["run", "no-such-scene"]) == 2
+    assert "Traceback" not in capsys.readouterr().err
