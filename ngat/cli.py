@@ -46,12 +46,17 @@ BUG_REPORT = (
 
 
 def parse_settings(items: list[str]) -> dict[str, str]:
-    """Turn ``["eps=0.05", ...]`` into a dictionary; reject items without ``=``."""
+    """Turn ``["eps=0.05", ...]`` into a dictionary; reject items without ``=`` or given twice."""
     settings = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name:
             raise ParameterError(f"--set expects NAME=VALUE, got '{item}'")
+        if name.strip() in settings:
+            raise ParameterError(
+                f"--set gives '{name.strip()}' twice ({settings[name.strip()]} and "
+                f"{value.strip()}): give it once"
+            )
         settings[name.strip()] = value.strip()
     return settings
 

@@ -198,3 +198,12 @@ def test_an_internal_error_is_reported_as_a_bug_with_its_traceback(monkeypatch, 
     # The package's own input errors keep the one-line treatment (exit 2).
     assert ngat.cli.main(["run", "no-such-scene"]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_parameter_given_twice_is_refused():
+    from ngat.cli import parse_settings
+    from ngat.parameters import ParameterError
+
+    assert parse_settings(["eps=0.05", "tol=0.3"]) == {"eps": "0.05", "tol": "0.3"}
+    with pytest.raises(ParameterError, match="'eps' twice"):
+        parse_settings(["eps=0.05", "eps=0.025"])
