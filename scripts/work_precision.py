@@ -70,11 +70,13 @@ SURFING_WINDOW = 0.5
 def overrides(method: str, value: float) -> dict:
     """Return the parameter changes of a case: ``tol`` (adaptive) or ``maxh`` (uniform).
 
+    The adaptive cases are Algorithm 2 alone (``adapt=paper``), whose absolute TOL they vary.
+
     ``method`` is ``"uniform"``, ``"adaptive"`` or ``"adaptive <nonlinear solver>"``.
     """
     if method.startswith("adaptive"):
         solver = method.split()[1:]
-        return {"tol": value, **({"nonlinear": solver[0]} if solver else {})}
+        return {"adapt": "paper", "tol": value, **({"nonlinear": solver[0]} if solver else {})}
     return {"adapt": "fixed", "maxh": value}
 
 
