@@ -9,7 +9,7 @@ default: ε = 0.01, A = 1.1, V = 0.2, from the uniform mesh of squares of side 0
 each with the scene's full load history (no fewer steps for either):
 
 - adaptive: Algorithm 2 (``adapt=paper``) at TOL ∈ {0.6, 0.3, 0.15, 0.075}, all else default
-  (h_floor = 1e-3, am_tol = 1e-3);
+  (floor ε/50 = 1e-3, am_tol = 1e-3);
 - uniform: ``adapt=fixed`` on the scene's initial mesh with ``maxh = h``, h ∈ {0.1, 0.05,
   0.025, 0.0125}; for two-slits h = 0.0125 (620 000 elements for all 161 steps, ~2 GB, est.
   1.5–2 h against 14 min at h = 0.025) is left out by default (``--hs`` chooses other sizes).
