@@ -127,19 +127,11 @@ class CrackBand:
         self.target = max(band_h * eps, 2 * h_floor)
         self.slits = list(slits)
 
-    def centres(self, state: ATState, tips: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Return the damaged vertices (v < ``DAMAGED``) and the slits' crack tips.
-
-        Parameters
-        ----------
-        state
-            Fields and mesh.
-        tips
-            Include the tips (of v of the current iterate); else none.
-        """
+    def centres(self, state: ATState) -> tuple[np.ndarray, np.ndarray]:
+        """Return the damaged vertices (v < ``DAMAGED``) and the slits' crack tips (of v)."""
         arrays, v = state.arrays, state.v_values
         damaged = arrays.coords[v < DAMAGED]
-        if not (tips and self.slits):
+        if not self.slits:
             return damaged, np.empty((0, 2))
         return damaged, np.array(crack_tips(arrays, v, self.slits))
 
@@ -166,7 +158,7 @@ class CrackBand:
         marked[coarse[near]] = True
         return marked
 
-    def refine(self, state: ATState, tips: bool = True) -> int:
+    def refine(self, state: ATState) -> int:
         """Bisect the band until no element in it is wider than the target.
 
         The centres (damaged vertices, tips) are taken once, on the current mesh: bisection
@@ -177,15 +169,13 @@ class CrackBand:
         ----------
         state
             Fields and mesh; refined in place (u, v and the previous step's v prolongated).
-        tips
-            Resolve the discs around the slits' crack tips too.
 
         Returns
         -------
         int
             Number of bisection rounds (0: the band was resolved already).
         """
-        damaged, centres = self.centres(state, tips)
+        damaged, centres = self.centres(state)
         coords, elements = state.arrays.coords, state.arrays.elements
         rounds = 0
         while rounds < MAX_ROUNDS and bisect(
