@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ngat.crack import Slit, crack_tips
+from ngat.forms import element_diameters
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
 
@@ -40,7 +41,6 @@ __all__ = [
     "BUFFER",
     "TIP_RADIUS",
     "band_elements",
-    "element_diameters",
     "mesh_geometry",
 ]
 
@@ -63,12 +63,6 @@ def mesh_geometry(mesh) -> tuple[np.ndarray, np.ndarray]:
     ngmesh = mesh.ngmesh
     elements = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
     return ngmesh.Coordinates()[:, :2], elements
-
-
-def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
-    """Return the longest edge of each triangle."""
-    xy = coords[elements]
-    return np.linalg.norm(xy - np.roll(xy, 1, axis=1), axis=2).max(axis=1)
 
 
 def band_elements(

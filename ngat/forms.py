@@ -26,6 +26,7 @@ from scipy.sparse import csr_matrix
 
 __all__ = [
     "vertex_rule",
+    "element_diameters",
     "lumped_dx",
     "exact_dx",
     "a_form",
@@ -109,6 +110,13 @@ def mesh_edges(elements: np.ndarray) -> np.ndarray:
     return np.unique(edges, axis=0)
 
 
+def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """Return the diameter h_T (longest edge) of each triangle."""
+    xy = coords[elements]
+    edges = xy[:, [1, 2, 0]] - xy
+    return np.sqrt((edges**2).sum(axis=2)).max(axis=1)
+
+
 class MeshArrays:
     """Element geometry of a P1 triangle mesh as numpy arrays, computed once per mesh.
 
@@ -150,8 +158,7 @@ class MeshArrays:
         self.mass = np.bincount(
             self.elements.ravel(), weights=np.repeat(self.area / 3, 3), minlength=self.nv
         )
-        edges = xy[:, [1, 2, 0]] - xy
-        self.diameter = np.sqrt((edges**2).sum(axis=2)).max(axis=1)
+        self.diameter = element_diameters(self.coords, self.elements)
 
     @cached_property
     def edges(self) -> np.ndarray:
