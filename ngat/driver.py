@@ -77,7 +77,7 @@ def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
     tips = crack_tips(state.arrays, state.v_values, scene.slits)
     for i, (x, y) in enumerate(tips, start=1):
         measures[f"tip{i}_x"], measures[f"tip{i}_y"] = x, y
-    regions = list(state.region_dofs.values())
+    regions = list(state.region_vertices.values())
     if len(regions) >= 2:
         measures["connected"] = connects(state.arrays, state.v_values, regions[0], regions[1])
     return measures

@@ -19,9 +19,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from ngat.elasticity import AntiPlane, Elasticity
 from ngat.forms import MeshArrays
 
-__all__ = ["EdgeTopology", "mu_estimator", "nu_estimator", "meets"]
+__all__ = ["EdgeTopology", "flux_jumps", "mu_estimator", "nu_estimator", "meets"]
 
 
 class EdgeTopology:
@@ -97,6 +98,18 @@ class EdgeTopology:
         """
         return self._flux_jump @ values
 
+    def element_flux_jump(self, flux: np.ndarray) -> np.ndarray:
+        """Return [s n] on interior edges and s n on boundary edges, shape (nedges, c).
+
+        Parameters
+        ----------
+        flux
+            A flux s constant on each element, shape (ne, c, 2) (one row per component).
+        """
+        first, second = self.elements[:, 0], self.elements[:, 1]
+        jump = flux[first] - np.where((second >= 0)[:, None, None], flux[second], 0.0)
+        return np.einsum("eik,ek->ei", jump, self.normal)
+
     def _flux_jump_matrix(self, arrays: MeshArrays) -> csr_matrix:
         """Return the sparse map from nodal values to normal-flux jumps (≤ 6 entries per row).
 
@@ -131,6 +144,20 @@ def _linear_square_integral(arrays: MeshArrays, values: np.ndarray) -> np.ndarra
     return arrays.area / 12 * ((values**2).sum(axis=1) + values.sum(axis=1) ** 2)
 
 
+def flux_jumps(
+    arrays: MeshArrays, edges: EdgeTopology, elasticity: Elasticity, u: np.ndarray
+) -> np.ndarray:
+    """Return [s(u) n] on interior edges and s(u) n on boundary edges, shape (nedges, c).
+
+    Anti-plane (s = ∇u): the exact sparse map of the nodal values,
+    :meth:`EdgeTopology.normal_flux_jump`; plane models: the element fluxes σ/2 of
+    :mod:`ngat.elasticity` applied to each edge's normal.
+    """
+    if elasticity.components == 1:
+        return edges.normal_flux_jump(u)[:, None]
+    return edges.element_flux_jump(elasticity.flux(elasticity.gradient(arrays, u)))
+
+
 def mu_estimator(
     arrays: MeshArrays,
     edges: EdgeTopology,
@@ -138,19 +165,23 @@ def mu_estimator(
     v: np.ndarray,
     eta: float,
     dirichlet: np.ndarray,
+    elasticity: Elasticity | None = None,
+    fixed: np.ndarray | None = None,
 ) -> np.ndarray:
     """Return the squared indicators μ_j(u, v; T)² of the u-step (paper, Proposition 4 (i)).
 
     For every element T that does not meet Ω_D,
 
-        μ_j(u, v; T)² = h_T⁴ ‖∇v‖⁴_{L∞(T)} ‖∇u‖²_{L2(T)} + h_T² ‖2v(∇v·∇u)‖²_{L2(T)}
-                        + h_T ‖(v² + η)[∂_n u]‖²_{L2(∂T∖Ω̄_D)},
+        μ_j(u, v; T)² = h_T⁴ ‖∇v‖⁴_{L∞(T)} ‖s(u)‖²_{L2(T)} + h_T² ‖2v s(u)∇v‖²_{L2(T)}
+                        + h_T ‖(v² + η)[s(u) n]‖²_{L2(∂T∖Ω̄_D)},
 
-    the residual of a_j(v; u, φ) = 0: the element residual div((v² + η)∇u) = 2v ∇v·∇u for P1
-    u, and the jump of the normal flux (v² + η)[∂_n u] on interior edges, the flux
-    (v² + η)∂_n u itself on Neumann edges (outer boundary outside Ω̄_D and both faces of each
-    slit). The paper prints the edge term as ‖(v² + η)|∇u|²‖; the flux jump is the residual's
-    (see docs/design.md). Every integral is exact for P1 data.
+    the residual of a_j(v; u, φ) = ∫ (P_j(v²) + η) s(u) : ∇φ = 0, with the flux s = ∇u of the
+    paper (anti-plane) or s = σ(u)/2 of plane elasticity (:mod:`ngat.elasticity`,
+    docs/plane-elasticity.md): the element residual div((v² + η) s) = 2v s∇v for P1 u, and the
+    jump of the normal flux (v² + η)[s n] on interior edges, the flux (v² + η) s n itself on
+    Neumann edges (outer boundary outside Ω̄_D and both faces of each slit). For s = ∇u this is
+    Proposition 4 (i) term by term. The paper prints the edge term as ‖(v² + η)|∇u|²‖; the
+    flux jump is the residual's (see docs/design.md). Every integral is exact for P1 data.
 
     "Meets": an element meets Ω_D if one of its vertices is a Dirichlet vertex, and its
     indicator is 0. Edges with both end points in Ω̄_D are left out of the edge sums; given
@@ -164,22 +195,31 @@ def mu_estimator(
     edges
         Edge topology of the same mesh.
     u, v
-        Nodal values of the displacement u and the phase field v (P1 DOFs), shape (nv,).
+        DOF values of the displacement u and nodal values of the phase field v.
     eta
         Residual stiffness η.
     dirichlet
-        Boolean vertex mask of Ω̄_D (the DOFs fixed by the Dirichlet data).
+        Boolean vertex mask of Ω̄_D (the vertices whose u is fixed by the Dirichlet data).
+    elasticity
+        The model's energy density; default anti-plane (the paper).
+    fixed
+        Boolean mask of the DOFs of u held by Dirichlet data, faces and edges (default: none
+        beyond ``dirichlet``). A component of the flux on an edge whose two end points hold
+        that component is no residual and is left out (a Dirichlet edge of the outer boundary
+        holding u_y leaves the traction's x component in the sum).
 
     Returns
     -------
     numpy.ndarray
         μ_j(u, v; T)², shape (ne,); μ_j(u, v) is the square root of the sum.
     """
+    elasticity = elasticity or AntiPlane()
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
-    grad_u, grad_v = arrays.gradient(u), arrays.gradient(v)
+    grad_v = arrays.gradient(v)
+    flux = elasticity.flux(elasticity.gradient(arrays, u))
     grad_v_sq = np.einsum("ek,ek->e", grad_v, grad_v)
-    coupling = np.einsum("ek,ek->e", grad_v, grad_u)
-    indicators = h2 * h2 * grad_v_sq * grad_v_sq * np.einsum("ek,ek->e", grad_u, grad_u) * area
+    coupling = np.sqrt((np.einsum("eik,ek->ei", flux, grad_v) ** 2).sum(axis=1))  # |s∇v|
+    indicators = h2 * h2 * grad_v_sq * grad_v_sq * (flux**2).sum(axis=(1, 2)) * area
     indicators += 4 * h2 * coupling * coupling * _linear_square_integral(arrays, v[arrays.elements])
     # ∫_e (v² + η)² ds for v linear from a to b along e.
     a, b = v[edges.vertices[:, 0]], v[edges.vertices[:, 1]]
@@ -188,7 +228,11 @@ def mu_estimator(
         + 2 * eta * (a**2 + a * b + b**2) / 3
         + eta**2
     )
-    per_edge = weight * edges.normal_flux_jump(u) ** 2
+    jumps = flux_jumps(arrays, edges, elasticity, u)
+    if fixed is not None:
+        held = fixed.reshape(elasticity.components, -1)[:, edges.vertices].all(axis=2).T
+        jumps = np.where(held, 0.0, jumps)
+    per_edge = weight * (jumps**2).sum(axis=1)
     per_edge[dirichlet[edges.vertices].all(axis=1)] = 0.0
     indicators += h * edges.element_sum(per_edge)
     indicators[meets(arrays, dirichlet)] = 0.0
@@ -202,6 +246,8 @@ def nu_estimator(
     v: np.ndarray,
     eps: float,
     crack: np.ndarray,
+    elasticity: Elasticity | None = None,
+    gc: float = 1.0,
 ) -> np.ndarray:
     """Return the squared indicators ν_j(u, v; T)² of the v-step (paper, Proposition 4 (ii)).
 
@@ -210,7 +256,9 @@ def nu_estimator(
         ν_j(u, v; T)² = h_T⁴ ‖∇v‖²_{L∞(T)} ‖α + |∇u|²‖²_{L2(T)}
                         + h_T² ‖(α + |∇u|²)v − α‖²_{L2(T)} + ε² h_T ‖[∂_n v]‖²_{L2(∂T∖CR)},
 
-    the residual of b_j(u; v, ψ) = 0. v is continuous, so the jump of ∇v across an edge is
+    the residual of b_j(u; v, ψ) = 0, divided by G_c. For the plane models |∇u|² becomes
+    W(u)/G_c, the energy density of :mod:`ngat.elasticity` (the v-equation only sees W).
+    v is continuous, so the jump of ∇v across an edge is
     its normal part, [∂_n v]; on boundary edges (the whole outer boundary, Ω_D included, since
     v is free there, and both faces of each slit) the flux ∂_n v itself is used. Every
     integral is exact for P1 data ((α + |∇u|²)v − α is linear on T).
@@ -226,11 +274,15 @@ def nu_estimator(
     edges
         Edge topology of the same mesh.
     u, v
-        Nodal values of the displacement u and the phase field v (P1 DOFs), shape (nv,).
+        DOF values of the displacement u and nodal values of the phase field v.
     eps
         Regularisation length ε.
     crack
         Boolean vertex mask of CR(t_k), where v = 0 is imposed.
+    elasticity
+        The model's energy density; default anti-plane (the paper).
+    gc
+        Fracture toughness G_c.
 
     Returns
     -------
@@ -239,8 +291,8 @@ def nu_estimator(
     """
     alpha = 1 / (4 * eps)
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
-    grad_u, grad_v = arrays.gradient(u), arrays.gradient(v)
-    reaction = alpha + np.einsum("ek,ek->e", grad_u, grad_u)
+    grad_v = arrays.gradient(v)
+    reaction = alpha + (elasticity or AntiPlane()).density(arrays, u) / gc
     indicators = h2 * h2 * np.einsum("ek,ek->e", grad_v, grad_v) * reaction * reaction * area
     residual = reaction[:, None] * v[arrays.elements] - alpha
     indicators += h2 * _linear_square_integral(arrays, residual)

@@ -52,47 +52,60 @@ def exact_dx():
     return dx(intrules={TRIG: IntegrationRule(TRIG, 2)})
 
 
-def a_form(fes: ngsolve.FESpace, v, eta: float, lumped: bool = True) -> BilinearForm:
+def a_form(fes: ngsolve.FESpace, v, eta: float, lumped: bool = True, bilinear=None) -> BilinearForm:
     """Return a_j(v; u, φ) = ∫ (P_j(v²) + η) ∇u·∇φ (paper, Definition 2).
 
     Parameters
     ----------
     fes
-        P1 space.
+        P1 space of u.
     v
         Phase field (GridFunction or CoefficientFunction), frozen during the u-step.
     eta
         Residual stiffness η.
     lumped
         ``False``: ∫ (v² + η) ∇u·∇φ, integrated exactly (consistent-mass variant).
+    bilinear
+        s(u) : ∇φ of the model, :meth:`ngat.elasticity.Elasticity.bilinear`; default
+        ∇u·∇φ (anti-plane, the paper).
     """
     u, phi = fes.TnT()
+    density = grad(u) * grad(phi) if bilinear is None else bilinear(u, phi)
     form = BilinearForm(fes, symmetric=True)
-    form += (v * v + eta) * grad(u) * grad(phi) * (lumped_dx() if lumped else exact_dx())
+    form += (v * v + eta) * density * (lumped_dx() if lumped else exact_dx())
     return form
 
 
-def b_form(fes: ngsolve.FESpace, u, eps: float, lumped: bool = True) -> BilinearForm:
+def b_form(
+    fes: ngsolve.FESpace, u, eps: float, lumped: bool = True, bilinear=None, gc: float = 1.0
+) -> BilinearForm:
     """Return b_j(u; v, ψ) without its constant part: ∫ P_j(vψ)(|∇u|² + α) + ε ∇v·∇ψ.
 
     The remaining term of Definition 2, ``-α ∫ P_j(ψ)``, is the right-hand side of the v-step
-    (for P1 test functions ∫ P_j(ψ) = ∫ ψ, so it is the same without lumping).
+    (for P1 test functions ∫ P_j(ψ) = ∫ ψ, so it is the same without lumping). The form is
+    that of I_j divided by G_c: |∇u|² becomes W(u)/G_c.
 
     Parameters
     ----------
     fes
-        P1 space.
+        P1 space of v.
     u
         Displacement, frozen during the v-step.
     eps
         Regularisation length ε; α = 1/(4ε).
     lumped
         ``False``: ∫ vψ (|∇u|² + α), integrated exactly (the consistent P1 mass).
+    bilinear
+        s(u) : ∇φ of the model (W(u) = s(u) : ∇u), :meth:`ngat.elasticity.Elasticity.bilinear`;
+        default ∇u·∇φ (anti-plane, the paper).
+    gc
+        Fracture toughness G_c.
     """
     alpha = 1 / (4 * eps)
+    density = grad(u) * grad(u) if bilinear is None else bilinear(u, u)
     v, psi = fes.TnT()
     form = BilinearForm(fes, symmetric=True)
-    form += ((grad(u) * grad(u) + alpha) * v * psi + eps * grad(v) * grad(psi)) * (
+    form += ((density / gc + alpha) * v * psi + eps * grad(v) * grad(psi)) * (
         lumped_dx() if lumped else exact_dx()
     )
     return form
@@ -200,27 +213,39 @@ class LumpedAssembler:
     lumped
         ``True``: the lumped forms of Definition 2; ``False``: every lumped term integrated
         exactly (``a_form(..., lumped=False)``, ``b_form(..., lumped=False)``).
+    dofs, stiffness
+        DOF numbers (ne, k) and element matrices (ne, k, k) of the matrix's space; default the
+        P1 vertices and ∫_T ∇φ_a·∇φ_b (a scalar P1 space). A vector space of u passes those of
+        its model (:meth:`ngat.elasticity.Elasticity.element_dofs`, ``element_stiffness``).
     """
 
-    def __init__(self, arrays: MeshArrays, matrix: ngsolve.la.SparseMatrixd, lumped: bool = True):
+    def __init__(
+        self,
+        arrays: MeshArrays,
+        matrix: ngsolve.la.SparseMatrixd,
+        lumped: bool = True,
+        dofs: np.ndarray | None = None,
+        stiffness: np.ndarray | None = None,
+    ):
         _, cols, rowptr = matrix.CSR()
         cols = np.asarray(cols, dtype=np.int64)
         rowptr = np.asarray(rowptr, dtype=np.int64)
         rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
-        n = arrays.nv
+        n = len(rowptr) - 1
         keys = rows * n + cols
-        el = arrays.elements
+        el = arrays.elements if dofs is None else dofs
         local = (el[:, :, None] * n + el[:, None, :]).ravel()
         self.position = np.searchsorted(keys, local)
         self.diagonal = np.searchsorted(keys, np.arange(n) * n + np.arange(n))
         self.nnz = len(keys)
         self.arrays = arrays
         self.lumped = lumped
+        self.stiffness = arrays.stiffness if stiffness is None else stiffness
         self.laplace = self._scatter(np.ones(arrays.ne))
 
     def _scatter(self, coefficient: np.ndarray, local: np.ndarray | None = None) -> np.ndarray:
         """Sum coefficient_T times the element matrices ``local`` (default: stiffness)."""
-        local = self.arrays.stiffness if local is None else local
+        local = self.stiffness if local is None else local
         weights = (coefficient[:, None, None] * local).ravel()
         return np.bincount(self.position, weights=weights, minlength=self.nnz)
 
@@ -243,6 +268,8 @@ class LumpedAssembler:
 
     def b_values(self, grad_u_sq: np.ndarray, eps: float) -> np.ndarray:
         """Return the values of b_j(u; ·, ·): ε·stiffness plus mass weighted with |∇u|² + α.
+
+        ``grad_u_sq`` is |∇u|² (anti-plane) or W(u)/G_c per element (:func:`b_form`).
 
         The mass is lumped (diagonal) or, with ``lumped=False``, the consistent element mass
         |T|/12 (1 + δ_ab).

@@ -131,17 +131,25 @@ class StepResult:
 
 
 def estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
-    """Return the squared element indicators of μ (``stage="u"``) or ν (``stage="v"``)."""
+    """Return the squared element indicators of μ (``stage="u"``) or ν (``stage="v"``).
+
+    Both are measured in the dual of the energy norm of their half-step, so that they compare
+    with I_j^{1/2} (:func:`tolerance`) whatever the material's units: μ² is divided by the
+    stiffness scale of the model (:attr:`ngat.elasticity.Elasticity.modulus`) and ν², the
+    indicator of the v-equation divided by G_c, is multiplied by G_c. For the anti-plane model
+    with G_c = 1 (the paper) both are Proposition 4's.
+    """
     with state.timer("estimate"):
         model = state.model
         if stage == "u":
             return mu_estimator(
                 state.arrays, state.edges, state.u_values, state.v_values, model.eta,
-                state.dirichlet,
-            )  # fmt: skip
+                state.dirichlet_vertices, state.elasticity, state.dirichlet,
+            ) / state.elasticity.modulus  # fmt: skip
         return nu_estimator(
-            state.arrays, state.edges, state.u_values, state.v_values, model.eps, crack
-        )
+            state.arrays, state.edges, state.u_values, state.v_values, model.eps, crack,
+            state.elasticity, model.gc,
+        ) * model.gc  # fmt: skip
 
 
 def tolerance(state: ATState, adaptivity: AdaptivityParameters) -> float:

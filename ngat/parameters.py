@@ -37,6 +37,10 @@ def _convert(kind: type, value: Any) -> Any:
     return kind(value)
 
 
+MODELS = ("antiplane", "plane_strain", "plane_stress")
+"""The elastic energy densities W of the functional (:mod:`ngat.elasticity`)."""
+
+
 @dataclass(frozen=True)
 class ModelParameters:
     """Ambrosio–Tortorelli model (paper, eq. 6–7 and Section 1.2).
@@ -58,6 +62,15 @@ class ModelParameters:
         Without lumping the discrete maximum principle (Proposition 3) can fail even on
         non-obtuse meshes (once h ≳ 5ε); the option exists to show that. The estimators of
         Proposition 4 are unchanged (they are derived for the lumped functional).
+    model
+        Elastic energy density W (:mod:`ngat.elasticity`): ``"antiplane"`` (W = |∇u|², the
+        paper), ``"plane_strain"`` or ``"plane_stress"`` (u = (u_x, u_y)).
+    young, poisson
+        Young's modulus E (force/length², per unit thickness) and Poisson's ratio ν of the
+        plane models; the anti-plane model does not use them.
+    gc
+        Fracture toughness G_c (energy per unit crack length): I_j's surface term is
+        G_c [α P_j((1 − v)²) + ε |∇v|²]. The paper's 1 by default.
     """
 
     eps: float = 0.05
@@ -65,6 +78,10 @@ class ModelParameters:
     crtol: float = 1e-4
     irreversibility: str = "crtol"
     lumping: bool = True
+    model: str = "antiplane"
+    young: float = 1.0
+    poisson: float = 0.0
+    gc: float = 1.0
 
     @property
     def alpha(self) -> float:
@@ -90,6 +107,17 @@ class ModelParameters:
             raise ParameterError(
                 f"irreversibility must be crtol or pointwise, got {self.irreversibility!r}"
             )
+        if self.model not in MODELS:
+            raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        if not 0 < self.young < float("inf"):
+            raise ParameterError(f"young must be positive and finite, got young={self.young}")
+        if not -1 < self.poisson < 0.5:
+            raise ParameterError(
+                f"poisson must lie in (-1, 0.5), got poisson={self.poisson}: "
+                "0.5 is incompressible, which P1 elements lock on"
+            )
+        if not 0 < self.gc < float("inf"):
+            raise ParameterError(f"gc must be positive and finite, got gc={self.gc}")
 
 
 NONLINEAR_SOLVERS = ("am", "overrelaxed", "anderson", "newton", "anderson-newton")
@@ -311,6 +339,17 @@ class Parameters:
         """Check every group; raise :class:`ParameterError` naming the first invalid value."""
         for group in self._groups().values():
             group.check()
+        if self.model.model != "antiplane" and "newton" in self.solver.nonlinear:
+            raise ParameterError(
+                f"nonlinear={self.solver.nonlinear} is not available for model="
+                f"{self.model.model} yet (its Hessian is the anti-plane one): set nonlinear=am, "
+                "overrelaxed or anderson"
+            )
+        if self.model.model != "antiplane" and self.solver.linear_solver != "direct":
+            raise ParameterError(
+                f"linear_solver={self.solver.linear_solver} is scalar (h1amg refuses vector "
+                f"spaces): model={self.model.model} needs linear_solver=direct"
+            )
         if not self.model.lumping and "newton" in self.solver.nonlinear:
             raise ParameterError(
                 f"nonlinear={self.solver.nonlinear} needs lumping=true: its Hessian is that of "

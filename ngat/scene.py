@@ -55,10 +55,12 @@ class Scene:
     name
         Scene name (used in results and for ``--resume`` checks).
     geometry
-        Returns the OCC shape; faces named after the Dirichlet regions.
+        Returns the OCC shape; faces (or edges) named after the Dirichlet regions.
     loads
         Dirichlet region name → ``g(t)`` returning a CoefficientFunction of x, y and the load
-        parameter ``t`` (an NGSolve ``Parameter``).
+        parameter ``t`` (an NGSolve ``Parameter``). A region is a face (Ω_D, the paper's
+        setting) or an edge of the boundary. For the plane models g has two components, or is a
+        dict naming the components it holds, e.g. ``{"y": t}`` (u_x free).
     times
         Load times t_0 < t_1 < … .
     parameters
@@ -97,8 +99,8 @@ class Scene:
     def check(self) -> None:
         """Raise :class:`~ngat.state.SceneError` if a Dirichlet region is missing.
 
-        That is: the scene has no Dirichlet region, or its geometry has no face of a Dirichlet
-        region's name. Scenes with their own ``mesh`` builder are checked on the mesh, by
+        That is: the scene has no Dirichlet region, or its geometry has no face or edge of a
+        Dirichlet region's name. Scenes with their own ``mesh`` builder are checked on the mesh, by
         :class:`~ngat.state.ATState`.
         """
         if not self.loads:
@@ -107,12 +109,15 @@ class Scene:
             )
         if self.mesh is not None or self.geometry is None:
             return
-        faces = {face.name for face in self.geometry().faces}
-        missing = sorted(set(self.loads) - faces)
+        shape = self.geometry()
+        faces = {face.name for face in shape.faces}
+        edges = {edge.name for edge in shape.edges} - {None}
+        missing = sorted(set(self.loads) - faces - edges)
         if missing:
             raise SceneError(
-                f"scene '{self.name}': Dirichlet region(s) {missing} are not faces of the "
-                f"geometry (faces: {sorted(faces)}); name the OCC faces accordingly"
+                f"scene '{self.name}': Dirichlet region(s) {missing} are neither faces nor "
+                f"edges of the geometry (faces: {sorted(faces)}, edges: {sorted(edges)}); name "
+                "the OCC faces or edges accordingly"
             )
 
     def configure(

@@ -16,8 +16,9 @@ from collections.abc import Callable, Mapping
 
 import ngsolve
 import numpy as np
-from ngsolve import H1, TRIG, GridFunction, IntegrationRule, Parameter
+from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule, Parameter
 
+from ngat.elasticity import Elasticity, elasticity
 from ngat.estimators import EdgeTopology
 from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
 from ngat.linear import AMGConjugateGradient, LaggedCholesky
@@ -41,31 +42,38 @@ def lumped_energies(
     u: np.ndarray,
     v: np.ndarray,
     square_mean: Callable[[np.ndarray], np.ndarray] | None = None,
+    density: Elasticity | None = None,
 ) -> dict[str, float]:
     """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
+
+    bulk = ∫ (P_j(v²) + η) W(u) and surface = G_c ∫ α P_j((1 − v)²) + ε |∇v|², with the energy
+    density W of the model (:mod:`ngat.elasticity`).
 
     Parameters
     ----------
     arrays
         Element geometry of the mesh.
     model
-        ε, η and α = 1/(4ε).
+        ε, η, α = 1/(4ε) and G_c.
     u, v
-        Nodal values of the two P1 fields.
+        DOF values of the two P1 fields.
     square_mean
         Per-element ∫_T f² / |T| of a P1 function f; the default is the vertex rule (eq. 7),
         :meth:`ngat.forms.LumpedAssembler.square_mean` without lumping gives the exact value.
+    density
+        The model's energy density; default that of ``model``.
     """
     if square_mean is None:
 
         def square_mean(f):
             return arrays.vertex_mean(f * f)
 
-    grad_u = arrays.gradient(u)
+    density = density or elasticity(model.model, model.young, model.poisson)
     grad_v = arrays.gradient(v)
-    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * (grad_u**2).sum(1))
-    surface = model.alpha * np.dot(arrays.area, square_mean(1 - v)) + model.eps * np.sum(
-        arrays.area * (grad_v**2).sum(1)
+    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * density.density(arrays, u))
+    surface = model.gc * (
+        model.alpha * np.dot(arrays.area, square_mean(1 - v))
+        + model.eps * np.sum(arrays.area * (grad_v**2).sum(1))
     )
     return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 
@@ -122,12 +130,14 @@ class ATState:
     ):
         if not loads:
             raise SceneError("the scene has no Dirichlet region: give at least one load")
-        materials = set(mesh.GetMaterials())
-        missing = [name for name in loads if name not in materials]
+        self.materials = set(mesh.GetMaterials())
+        boundaries = set(mesh.GetBoundaries())
+        missing = [name for name in loads if name not in self.materials | boundaries]
         if missing:
             raise SceneError(
-                f"Dirichlet region(s) {missing} are not materials of the mesh "
-                f"(materials: {sorted(materials)}); name the OCC faces accordingly"
+                f"Dirichlet region(s) {missing} are neither materials (faces) nor boundaries "
+                f"(edges) of the mesh (materials: {sorted(self.materials)}, boundaries: "
+                f"{sorted(boundaries)}); name the OCC faces or edges accordingly"
             )
         self.mesh = mesh
         self.model = model
@@ -140,11 +150,15 @@ class ATState:
         self.cg_iterations: list[int] = []
         self.cg_not_converged = 0
         self.t = Parameter(0.0)
-        self.loads = {name: g(self.t) for name, g in loads.items()}
-        self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
         self.crack = crack
+        self.elasticity = elasticity(model.model, model.young, model.poisson)
+        self.loads, self.load_components = {}, {}
+        for name, g in loads.items():
+            self.load_components[name], self.loads[name] = self._load(name, g(self.t))
+        self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
         self.fes = H1(mesh, order=1, autoupdate=True)
-        self.u = GridFunction(self.fes, autoupdate=True)
+        self.fes_u = self.fes if self.elasticity.components == 1 else self.elasticity.space(mesh)
+        self.u = GridFunction(self.fes_u, autoupdate=True)
         self.v = GridFunction(self.fes, autoupdate=True)
         self.v_prev = GridFunction(self.fes, autoupdate=True)
         self.v_iter = GridFunction(self.fes, autoupdate=True)
@@ -158,22 +172,49 @@ class ATState:
     def mesh_changed(self) -> None:
         """Rebuild everything that depends on the mesh (call after ``mesh.Refine()``)."""
         with self.timer("assembly"):
-            self.arrays = MeshArrays(self.mesh)
-            # One NGSolve assembly of a_j builds the graph; b_j has the same graph, and both
-            # get their values from the vectorised assembler (equal to a_form and b_form,
-            # checked in tests/test_forms.py).
-            self.a_matrix = a_form(self.fes, self.v, self.model.eta).Assemble().mat
-            self.b_matrix = self.a_matrix.CreateMatrix()
-            self.assembler = LumpedAssembler(self.arrays, self.a_matrix, self.model.lumping)
-            self.region_dofs = {
-                name: np.array(self.fes.GetDofs(self.mesh.Materials(name)), dtype=bool)
-                for name in self.loads
-            }
+            self.arrays = arrays = MeshArrays(self.mesh)
+            # One NGSolve assembly of a_j builds the graph; b_j has the same graph when u is
+            # scalar, and both get their values from the vectorised assemblers (equal to
+            # a_form and b_form, checked in tests/test_forms.py).
+            density = self.elasticity
+            self.a_matrix = (
+                a_form(self.fes_u, self.v, self.model.eta, bilinear=density.bilinear).Assemble().mat
+            )
+            self.assembler = LumpedAssembler(
+                arrays, self.a_matrix, self.model.lumping,
+                density.element_dofs(arrays), density.element_stiffness(arrays),
+            )  # fmt: skip
+            if density.components == 1:
+                self.b_matrix = self.a_matrix.CreateMatrix()
+                self.b_assembler = self.assembler
+            else:
+                self.b_matrix = (
+                    b_form(self.fes, self.u, self.model.eps, bilinear=density.bilinear)
+                    .Assemble()
+                    .mat
+                )
+                self.b_assembler = LumpedAssembler(arrays, self.b_matrix, self.model.lumping)
+            self.region_vertices = {}
+            self.region_dofs = {}
+            for name, components in self.load_components.items():
+                region = (
+                    self.mesh.Materials(name)
+                    if name in self.materials
+                    else self.mesh.Boundaries(name)
+                )
+                vertices = np.array(self.fes.GetDofs(region), dtype=bool)
+                dofs = np.zeros((density.components, arrays.nv), dtype=bool)
+                dofs[components] = vertices
+                self.region_vertices[name], self.region_dofs[name] = vertices, dofs.ravel()
             dirichlet = np.logical_or.reduce(list(self.region_dofs.values()))
             if not dirichlet.any():
                 raise SceneError("the Dirichlet regions contain no DOFs of the mesh")
             self.dirichlet = dirichlet
-            self._load_points = {name: self._pulled_vertices(name) for name in self.loads}
+            # Ω_D of the paper: the Dirichlet faces (μ is 0 on the elements meeting them).
+            self.dirichlet_vertices = np.zeros(arrays.nv, dtype=bool)
+            for name in self.materials.intersection(self.loads):
+                self.dirichlet_vertices |= self.region_vertices[name]
+            self._load_points = {name: self._load_points_of(name) for name in self.loads}
             self.initial_crack = np.zeros(self.fes.ndof, dtype=bool)
             if callable(self.crack):
                 self.initial_crack = np.asarray(self.crack(self.arrays.coords), dtype=bool)
@@ -189,7 +230,49 @@ class ATState:
             self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
             self._residual = self.a_matrix.CreateColVector()
             self._correction = self.a_matrix.CreateColVector()
+            self._v_residual = self.b_matrix.CreateColVector()
+            self._v_step = self.b_matrix.CreateColVector()
             self.bound_active = 0
+
+    def _load(self, name: str, value) -> tuple[list[int], ngsolve.CoefficientFunction]:
+        """Return the components a region's load fixes and the load as one CoefficientFunction.
+
+        ``value`` is g(t): a number or CoefficientFunction with all components of u, or (plane
+        models) a dict naming the components it fixes, e.g. ``{"y": t}`` (u_x stays free).
+        """
+        components = self.elasticity.components
+        if isinstance(value, Mapping):
+            names = "xy" if components > 1 else ""
+            unknown = sorted(set(value) - set(names))
+            if unknown:
+                raise SceneError(
+                    f"the load of region '{name}' names the component(s) {unknown}: the "
+                    f"{self.model.model} model's u has "
+                    + (f"the components {', '.join(names)}" if names else "none, give g itself")
+                )
+            fixed = sorted(value)
+            indices = [names.index(c) for c in fixed]
+            return indices, CoefficientFunction(tuple(value[c] for c in fixed))
+        g = CoefficientFunction(value)
+        if g.dim != components:
+            raise SceneError(
+                f"the load of region '{name}' has {g.dim} component(s), the "
+                f"{self.model.model} model's u has {components}: give "
+                + ("a number" if components == 1 else 'CF((gx, gy)) or {"x": gx, "y": gy}')
+            )
+        return list(range(components)), g
+
+    def _load_points_of(self, region: str):
+        """Return where a region's load is evaluated and the vertex of each point.
+
+        A face (Ω_D): :meth:`_pulled_vertices`. An edge: its vertices themselves (Dirichlet data
+        on a slit face would need the side; take edges on the outer boundary).
+        """
+        if region in self.materials:
+            return self._pulled_vertices(region)
+        vertices = np.flatnonzero(self.region_vertices[region])
+        xy = self.arrays.coords[vertices]
+        return self.mesh(xy[:, 0], xy[:, 1]), vertices
 
     def _pulled_vertices(self, region: str, shift: float = 1e-9):
         """Return mapped points next to each vertex inside each element of ``region``.
@@ -237,7 +320,7 @@ class ATState:
 
     # -- load -------------------------------------------------------------------------------
     def apply_load(self, t: float) -> None:
-        """Set the load parameter to ``t`` and u = g(t) on every Dirichlet region."""
+        """Set the load parameter to ``t`` and u = g(t) on every Dirichlet region's components."""
         self.t.Set(t)
         self._interpolate(self.loads, self.u_values)
 
@@ -248,15 +331,17 @@ class ATState:
         from its vertices into its interior, and a vertex takes the mean over its elements. On
         a slit face this picks the value of the face's own side (the twin nodes have equal
         coordinates, so evaluating at the vertex itself could not tell the sides apart, and
-        ``GridFunction.Set`` does exactly that).
+        ``GridFunction.Set`` does exactly that). Only the components the region fixes are written.
         """
+        nv = self.arrays.nv
         for name, g in functions.items():
             points, vertices = self._load_points[name]
-            values = g(points).ravel()
-            total = np.bincount(vertices, weights=values, minlength=len(out))
-            count = np.bincount(vertices, minlength=len(out))
+            values = np.asarray(g(points)).reshape(len(vertices), -1)
+            count = np.bincount(vertices, minlength=nv)
             dofs = count > 0
-            out[dofs] = total[dofs] / count[dofs]
+            for i, component in zip(self.load_components[name], values.T, strict=True):
+                total = np.bincount(vertices, weights=component, minlength=nv)
+                out[i * nv : (i + 1) * nv][dofs] = total[dofs] / count[dofs]
 
     # -- half-steps -------------------------------------------------------------------------
     def solve_u(self) -> None:
@@ -290,8 +375,8 @@ class ATState:
         """
         arrays = self.arrays
         with self.timer("assembly"):
-            grad_u = arrays.gradient(self.u_values)
-            values = self.assembler.b_values((grad_u**2).sum(axis=1), self.model.eps)
+            density = self.elasticity.density(arrays, self.u_values) / self.model.gc
+            values = self.b_assembler.b_values(density, self.model.eps)
             self.b_matrix.AsVector().FV().NumPy()[:] = values
             self.v_values[crack] = 0.0
         with self.timer("solve"):
@@ -320,7 +405,7 @@ class ATState:
                 form = (
                     a_form(space, self.v, self.model.eta)
                     if stage == "u"
-                    else b_form(space, self.u, self.model.eps)
+                    else b_form(space, self.u, self.model.eps, gc=self.model.gc)
                 )
                 return AMGConjugateGradient(form, matrix, free)
             solver.values_changed(free)
@@ -330,9 +415,12 @@ class ATState:
         solver.values_changed()
         return solver
 
-    def _solve(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
-        """Set the correction to the solution of the system with the residual as right side."""
-        solver.solve(self._residual, self._correction)
+    def _solve(self, solver: LaggedCholesky | AMGConjugateGradient, stage: str = "u") -> None:
+        """Set the stage's correction to the solution of the system with its residual."""
+        if stage == "u":
+            solver.solve(self._residual, self._correction)
+        else:
+            solver.solve(self._v_residual, self._v_step)
         self.linear_solves += 1
         if isinstance(solver, AMGConjugateGradient):
             self.cg_iterations.append(solver.iterations)
@@ -340,10 +428,10 @@ class ATState:
 
     def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
         """Add the solution of B δ = αm − B v on the solver's free DOFs to v."""
-        self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
-        self._residual.data -= self.b_matrix * self.v.vec
-        self._solve(solver)
-        self.v.vec.data += self._correction
+        self._v_residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
+        self._v_residual.data -= self.b_matrix * self.v.vec
+        self._solve(solver, "v")
+        self.v.vec.data += self._v_step
 
     def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
         """Primal-dual active set for 0 ≤ v ≤ upper on the free DOFs; return the active count."""
@@ -362,9 +450,9 @@ class ATState:
                 self._v_correction(self._b_solver)
             else:
                 self._v_correction(LaggedCholesky(self.b_matrix, inactive, 0))
-            self._residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
-            self._residual.data -= self.b_matrix * self.v.vec
-            gradient = -self._residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
+            self._v_residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
+            self._v_residual.data -= self.b_matrix * self.v.vec
+            gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
             new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
             new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
             if np.array_equal(new_low, low) and np.array_equal(new_high, high):
@@ -381,25 +469,33 @@ class ATState:
         With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
         """
         return lumped_energies(
-            self.arrays, self.model, self.u_values, self.v_values, self.assembler.square_mean
-        )
+            self.arrays, self.model, self.u_values, self.v_values, self.assembler.square_mean,
+            self.elasticity,
+        )  # fmt: skip
 
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.
 
         The residual r = A u of the u-equation vanishes at free DOFs; at a DOF of Ω_D it is the
         nodal reaction. ``force_<region>`` = 2 Σ_{i∈Ω_D} r_i is the derivative of the bulk
-        energy with respect to a uniform shift of u on that region; ``force`` = 2 r·∂g/∂t is the
-        derivative of the bulk energy with respect to the load parameter t.
+        energy with respect to a uniform shift of u on that region (plane models:
+        ``force_<region>_x`` and ``_y`` per component); ``force`` = 2 r·∂g/∂t is the derivative
+        of the bulk energy with respect to the load parameter t.
         """
         self.a_matrix.AsVector().FV().NumPy()[:] = self.assembler.a_values(
             self.v_values, self.model.eta
         )
         self._residual.data = self.a_matrix * self.u.vec
         residual = 2 * self._residual.FV().NumPy()
-        forces = {
-            f"force_{name}": float(residual[dofs].sum()) for name, dofs in self.region_dofs.items()
-        }
+        components = self.elasticity.components
+        forces = {}
+        for name, dofs in self.region_dofs.items():
+            if components == 1:
+                forces[f"force_{name}"] = float(residual[dofs].sum())
+                continue
+            per_component = np.where(dofs, residual, 0.0).reshape(components, -1).sum(axis=1)
+            for i in self.load_components[name]:
+                forces[f"force_{name}_{'xy'[i]}"] = float(per_component[i])
         rate = np.zeros_like(residual)
         self._interpolate(self.load_rates, rate)
         forces["force"] = float(np.dot(residual[self.dirichlet], rate[self.dirichlet]))

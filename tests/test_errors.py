@@ -35,7 +35,7 @@ SCENE_FILES = {
     "wrong_material.py": """
         import dataclasses
         from geometries.profile_1d import scene as base
-        scene = dataclasses.replace(base, name="wrong-material", loads={"bottom": lambda t: t})
+        scene = dataclasses.replace(base, name="wrong-material", loads={"nowhere": lambda t: t})
         """,
 }
 
@@ -68,7 +68,7 @@ CASES = {
     "no Dirichlet region": (["run", "no_region.py"], ["has no Dirichlet region", "'loads'"]),
     "region not a face": (
         ["run", "wrong_face.py"],
-        ["['bottom'] are not faces of the geometry", "name the OCC faces"],
+        ["['bottom'] are neither faces nor edges of the geometry", "name the OCC faces"],
     ),
     "sweep grid": (
         ["sweep", "profile-1d", "--grid", "eps=0.05", "epsilon=1,2"],
@@ -140,7 +140,7 @@ def test_region_missing_from_the_mesh_is_named(workspace, tmp_path):
     out = tmp_path / "out"
     for _ in range(2):
         result = ngat("run", "wrong_material.py", "--out", str(out), cwd=root)
-        assert_one_clean_line(result, ["['bottom'] are not materials of the mesh"])
+        assert_one_clean_line(result, ["['nowhere'] are neither materials (faces) nor boundaries"])
     assert not (out / "energies.csv").exists()
 
 

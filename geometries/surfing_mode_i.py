@@ -1,0 +1,107 @@
+"""Mode-I surfing in plane strain: a translating K_I crack-tip field drives the crack.
+
+The strip, frame Ω_D and pre-crack of ``surfing`` (Ω = (0, 2) × (−0.7, 0.7), the slit
+[0, 0.6] × {0} cutting through the frame of thickness 0.1), meshed unstructured by Netgen, with
+the plane-strain model (E = 1, ν = 0.3, G_c = 1) and, on Ω_D, Williams' mode-I field about the
+imposed tip (a₀ + V t, 0):
+
+    u = K/(2μ) sqrt(r/(2π)) (cos(θ/2) (κ − cos θ), sin(θ/2) (κ − cos θ)),   κ = 3 − 4ν,
+
+θ ∈ (−π, π], whose branch cut lies on the slit (traction free on both faces). Its energy
+release rate is G = K² (1 − ν²)/E; the scene is driven by A = sqrt(G) (so that, as in
+``surfing``, the crack grows once A² reaches the effective toughness G_eff of the crack band),
+A(t) = A · min(1, t/ramp).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from ngsolve import CF, IfPos, Parameter, atan2, cos, pi, sin, sqrt, x, y
+
+from geometries.surfing import CRACK_LENGTH, SLITS, geometry
+from ngat.elasticity import lame
+from ngat.scene import Scene
+
+YOUNG = 1.0
+"""E of the scene."""
+POISSON = 0.3
+"""ν of the scene."""
+EPS = 0.01
+"""ε of the scene."""
+AMPLITUDE = 1.1
+"""A = sqrt(G) of the default run: G = 1.21 ≈ 1.1 G_eff of the default crack band."""
+SPEED = 0.2
+"""V: speed of the imposed tip."""
+RAMP = 0.25
+"""Time over which the amplitude is ramped in."""
+TIMES = np.round(0.025 * np.arange(61), 10)
+"""Load times of the default run: t ∈ [0, 1.5]."""
+
+
+def stress_intensity(amplitude, young: float = YOUNG, poisson: float = POISSON):
+    """Return K_I = A sqrt(E/(1 − ν²)), the K of the energy release rate G = A² (plane strain)."""
+    return amplitude * math.sqrt(young / (1 - poisson**2))
+
+
+def tip_field(amplitude, tip_x, young: float = YOUNG, poisson: float = POISSON):
+    """Return Williams' plane-strain mode-I displacement with G = A² about (tip_x, 0).
+
+    Parameters
+    ----------
+    amplitude
+        A = sqrt(G): a number or a CoefficientFunction (of the load parameter).
+    tip_x
+        x of the tip: a number or a CoefficientFunction.
+    young, poisson
+        E and ν.
+    """
+    _, mu = lame(young, poisson)
+    kappa = 3 - 4 * poisson
+    dx = x - tip_x
+    r = sqrt(dx * dx + y * y)
+    theta = atan2(y, dx)
+    scale = stress_intensity(1.0, young, poisson) * amplitude / (2 * mu) * sqrt(r / (2 * pi))
+    return CF(
+        (
+            scale * cos(theta / 2) * (kappa - cos(theta)),
+            scale * sin(theta / 2) * (kappa - cos(theta)),
+        )
+    )
+
+
+def make_scene(
+    amplitude: float = AMPLITUDE,
+    speed: float = SPEED,
+    ramp: float = RAMP,
+    eps: float = EPS,
+    times=TIMES,
+    name: str = "surfing-mode-i",
+) -> Scene:
+    """Return a mode-I surfing scene (see the module docstring for the parameters)."""
+
+    def load(t: Parameter):
+        scale = IfPos(t - ramp, 1.0, t / ramp) if ramp > 0 else 1.0
+        return tip_field(amplitude * scale, CRACK_LENGTH + speed * t)
+
+    return Scene(
+        name=name,
+        description="mode-I surfing in plane strain: a translating K_I field drives the crack",
+        geometry=geometry,
+        loads={"frame": load},
+        times=times,
+        slits=SLITS,
+        parameters={
+            "model": "plane_strain",
+            "young": YOUNG,
+            "poisson": POISSON,
+            "eps": eps,
+            "maxh": 0.1,
+            "nonlinear": "am",
+        },  # fmt: skip
+        quick={"times": TIMES[::4], "tol_rel": 0.3},
+    )
+
+
+scene = make_scene()

@@ -1,0 +1,201 @@
+"""The elastic energy density W of each model: anti-plane (the paper), plane strain, plane stress.
+
+Every model shares one lumped functional,
+
+    I_j(u, v) = ∫ (P_j(v²) + η) W(u) + G_c [α P_j((1 − v)²) + ε |∇v|²],   α = 1/(4ε),
+
+the paper's eq. (7) with the energy density W of the model:
+
+- ``antiplane``: u is the scalar out-of-plane displacement and W = |∇u|² (the paper);
+- ``plane_strain``: u = (u_x, u_y) and W = μ ε(u):ε(u) + (λ/2) (tr ε(u))², with the Lamé
+  constants of Young's modulus E and Poisson's ratio ν;
+- ``plane_stress``: the same with λ replaced by the plane-stress λ* = 2λμ/(λ + 2μ).
+
+W is a quadratic form, W(u) = s(u) : ∇u with the flux s = ∇u (anti-plane) or s = σ(u)/2
+(σ = 2μ ε + λ tr ε I), so the u-step's bilinear form is a_j(v; u, φ) = ∫ (P_j(v²) + η) s(u) : ∇φ
+and a_j(v; u, u) = ∫ (P_j(v²) + η) W(u). With P1 elements ∇u, ε(u), s(u) and W(u) are constant
+on each triangle. Units: lengths in the scene's unit L, E and W in units of force/L² (energy per
+area, plane problems per unit thickness), G_c in energy per length of crack (force/L).
+
+An :class:`Elasticity` gives the P1 space of u and, from it, the symbolic bilinear form (the
+definition, :func:`ngat.forms.a_form`), the element matrices of the fast assembly
+(:class:`ngat.forms.LumpedAssembler`), the density per element (the v-step, the energies, ν of
+:mod:`ngat.estimators`) and the flux with its edge jumps (μ).
+"""
+
+from __future__ import annotations
+
+import ngsolve
+import numpy as np
+from ngsolve import H1, InnerProduct, Sym, Trace, VectorH1, grad
+
+from ngat.forms import MeshArrays
+
+__all__ = ["Elasticity", "AntiPlane", "PlaneElasticity", "lame", "elasticity"]
+
+
+class Elasticity:
+    """Energy density W of one model (see the module docstring).
+
+    Attributes
+    ----------
+    components : int
+        Components of u: 1 (anti-plane) or 2 (plane).
+    modulus : float
+        Stiffness scale c of a_j: the energy norm of u is at least sqrt(c) ‖∇u‖ (up to Korn's
+        constant), so μ/sqrt(c) bounds the u-residual in the dual of the energy norm
+        (:func:`ngat.minimization.estimate`). 1 for the anti-plane W = |∇u|², the shear
+        modulus μ for the plane models.
+    """
+
+    components = 1
+    modulus = 1.0
+
+    def space(self, mesh: ngsolve.Mesh) -> ngsolve.FESpace:
+        """Return the P1 space of u on ``mesh`` (updated with the mesh)."""
+        raise NotImplementedError
+
+    def bilinear(self, u, phi) -> ngsolve.CoefficientFunction:
+        """Return s(u) : ∇φ as a CoefficientFunction of trial/test functions or GridFunctions."""
+        raise NotImplementedError
+
+    def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
+        """Return the DOF numbers of u on each element, shape (ne, 3 · components)."""
+        raise NotImplementedError
+
+    def element_stiffness(self, arrays: MeshArrays) -> np.ndarray:
+        """Return ∫_T s(φ_a) : ∇φ_b for the local DOFs of :meth:`element_dofs`."""
+        raise NotImplementedError
+
+    def gradient(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return ∇u on each element, shape (ne, components, 2), from the DOF values of u."""
+        nv = arrays.nv
+        return np.stack(
+            [arrays.gradient(u[i * nv : (i + 1) * nv]) for i in range(self.components)], axis=1
+        )
+
+    def flux(self, gradient: np.ndarray) -> np.ndarray:
+        """Return s(u) per element, shape (ne, components, 2), from :meth:`gradient`."""
+        raise NotImplementedError
+
+    def density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return W(u) on each element, shape (ne,)."""
+        raise NotImplementedError
+
+
+class AntiPlane(Elasticity):
+    """W = |∇u|², the paper's anti-plane displacement (u scalar, s = ∇u)."""
+
+    def space(self, mesh: ngsolve.Mesh) -> ngsolve.FESpace:
+        """Return P1 (``H1`` of order 1)."""
+        return H1(mesh, order=1, autoupdate=True)
+
+    def bilinear(self, u, phi) -> ngsolve.CoefficientFunction:
+        """Return ∇u·∇φ."""
+        return grad(u) * grad(phi)
+
+    def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
+        """Return the element vertices (P1 DOF = vertex)."""
+        return arrays.elements
+
+    def element_stiffness(self, arrays: MeshArrays) -> np.ndarray:
+        """Return ∫_T ∇φ_a·∇φ_b."""
+        return arrays.stiffness
+
+    def flux(self, gradient: np.ndarray) -> np.ndarray:
+        """Return ∇u."""
+        return gradient
+
+    def density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return |∇u|²."""
+        return (arrays.gradient(u) ** 2).sum(axis=1)
+
+
+class PlaneElasticity(Elasticity):
+    """W = μ ε:ε + (λ/2)(tr ε)² of isotropic plane elasticity (u = (u_x, u_y), s = σ/2).
+
+    The DOFs of u are those of NGSolve's ``VectorH1``: all x components (one per vertex),
+    then all y components.
+
+    Parameters
+    ----------
+    lam, mu
+        Lamé constants λ and μ (λ* for plane stress, see :func:`elasticity`).
+    """
+
+    components = 2
+
+    def __init__(self, lam: float, mu: float):
+        self.lam = lam
+        self.mu = mu
+        self.modulus = mu
+
+    def space(self, mesh: ngsolve.Mesh) -> ngsolve.FESpace:
+        """Return P1 vector fields (``VectorH1`` of order 1)."""
+        return VectorH1(mesh, order=1, autoupdate=True)
+
+    def bilinear(self, u, phi) -> ngsolve.CoefficientFunction:
+        """Return σ(u):ε(φ)/2 = μ ε(u):ε(φ) + (λ/2) div u div φ."""
+        return self.mu * InnerProduct(Sym(grad(u)), Sym(grad(phi))) + self.lam / 2 * Trace(
+            grad(u)
+        ) * Trace(grad(phi))
+
+    def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
+        """Return (x₀, x₁, x₂, y₀, y₁, y₂): vertex numbers, then vertex numbers + nv."""
+        return np.hstack([arrays.elements, arrays.elements + arrays.nv])
+
+    def element_stiffness(self, arrays: MeshArrays) -> np.ndarray:
+        """Return |T| [μ/2 (δ_ij ∇φ_a·∇φ_b + ∂_j φ_a ∂_i φ_b) + λ/2 ∂_i φ_a ∂_j φ_b].
+
+        Row (i, a) and column (j, b) belong to the test function φ_a e_i and the trial
+        function φ_b e_j, ordered as in :meth:`element_dofs`.
+        """
+        g = arrays.grad_phi  # (ne, 3, 2): ∂_k φ_a
+        laplace = np.einsum("eak,ebk->eab", g, g)
+        eye = np.eye(2)
+        local = (
+            self.mu / 2 * (eye[None, :, None, :, None] * laplace[:, None, :, None, :])
+            + self.mu / 2 * np.einsum("eaj,ebi->eiajb", g, g)
+            + self.lam / 2 * np.einsum("eai,ebj->eiajb", g, g)
+        )
+        return arrays.area[:, None, None] * local.reshape(-1, 6, 6)
+
+    def strain(self, gradient: np.ndarray) -> np.ndarray:
+        """Return ε = (∇u + ∇uᵀ)/2 per element."""
+        return (gradient + gradient.transpose(0, 2, 1)) / 2
+
+    def flux(self, gradient: np.ndarray) -> np.ndarray:
+        """Return σ/2 = μ ε + (λ/2) tr ε I."""
+        strain = self.strain(gradient)
+        trace = strain[:, 0, 0] + strain[:, 1, 1]
+        return self.mu * strain + self.lam / 2 * trace[:, None, None] * np.eye(2)
+
+    def density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return μ ε:ε + (λ/2)(tr ε)²."""
+        strain = self.strain(self.gradient(arrays, u))
+        trace = strain[:, 0, 0] + strain[:, 1, 1]
+        return self.mu * (strain**2).sum(axis=(1, 2)) + self.lam / 2 * trace**2
+
+
+def lame(young: float, poisson: float) -> tuple[float, float]:
+    """Return the Lamé constants (λ, μ) of Young's modulus E and Poisson's ratio ν."""
+    return young * poisson / ((1 + poisson) * (1 - 2 * poisson)), young / (2 * (1 + poisson))
+
+
+def elasticity(model: str, young: float = 1.0, poisson: float = 0.0) -> Elasticity:
+    """Return the energy density of ``model`` (one of :data:`MODELS`).
+
+    Parameters
+    ----------
+    model
+        One of :data:`ngat.parameters.MODELS`: ``"antiplane"`` (W = |∇u|², E and ν unused),
+        ``"plane_strain"`` or ``"plane_stress"``.
+    young, poisson
+        E and ν of the plane models (−1 < ν < 1/2).
+    """
+    if model == "antiplane":
+        return AntiPlane()
+    lam, mu = lame(young, poisson)
+    if model == "plane_stress":
+        lam = 2 * lam * mu / (lam + 2 * mu)
+    return PlaneElasticity(lam, mu)

@@ -1,0 +1,139 @@
+"""Plane elasticity in the one lumped functional: forms, energy density, homogeneous damage."""
+
+import numpy as np
+import pytest
+from ngsolve import CF, Integrate, x, y
+
+from ngat.elasticity import PlaneElasticity, elasticity, lame
+from ngat.forms import LumpedAssembler, a_form, b_form, exact_dx, lumped_dx
+from ngat.geometry import generate_mesh, glue, rectangle
+from ngat.minimization import alternating_minimization
+from ngat.parameters import ModelParameters, Parameters
+from ngat.state import ATState
+
+E, NU = 2.5, 0.3
+STRAIN = np.array([[0.02, 0.015], [0.015, -0.01]])
+"""A homogeneous strain with all three components."""
+
+
+def framed_square(maxh: float = 0.25):
+    """Return a mesh of the unit square ``body`` inside the ``frame`` [−0.25, 1.25]²."""
+    d = 0.25
+    strips = [(-d, -d, 1 + d, 0), (-d, 1, 1 + d, 1 + d), (-d, 0, 0, 1), (1, 0, 1 + d, 1)]
+    frame = [rectangle(*strip, "frame") for strip in strips]
+    return generate_mesh(glue([*frame, rectangle(0, 0, 1, 1, "body")]), maxh)
+
+
+def affine_load(t):
+    """u = t ε x (plus a rotation, which costs no energy) on the frame."""
+    (a, b), (c, d) = STRAIN
+    return CF((t * (a * x + (b + 0.01) * y), t * ((c - 0.01) * x + d * y)))
+
+
+def textbook_density(model: str) -> float:
+    """W of :data:`STRAIN` from the textbook formulas in E and ν (not from λ, μ)."""
+    exx, eyy, exy = STRAIN[0, 0], STRAIN[1, 1], STRAIN[0, 1]
+    shear = E / (1 + NU) * exy**2
+    if model == "plane_stress":
+        return E / (2 * (1 - NU**2)) * (exx**2 + eyy**2 + 2 * NU * exx * eyy) + shear
+    factor = E / (2 * (1 + NU) * (1 - 2 * NU))
+    return factor * ((1 - NU) * (exx**2 + eyy**2) + 2 * NU * exx * eyy) + shear
+
+
+def plane_state(model: str, maxh: float = 0.25, **values) -> ATState:
+    parameters = ModelParameters(model=model, young=E, poisson=NU, **values)
+    return ATState(framed_square(maxh), parameters, {"frame": affine_load})
+
+
+def test_lame_constants():
+    lam, mu = lame(E, NU)
+    assert mu == pytest.approx(E / (2 * (1 + NU)), rel=1e-15)
+    assert lam == pytest.approx(E * NU / ((1 + NU) * (1 - 2 * NU)), rel=1e-15)
+    stress = elasticity("plane_stress", E, NU)
+    assert stress.lam == pytest.approx(E * NU / (1 - NU**2), rel=1e-14)
+
+
+@pytest.mark.parametrize("lumped", [True, False])
+def test_vector_assembly_equals_ngsolve_forms(lumped):
+    state = plane_state("plane_strain", lumping=lumped)
+    state.v.Set(0.5 + 0.3 * x * y)
+    state.u.Set(CF((x * x - y, 0.3 * x * y + y)))
+    density = state.elasticity
+    a = a_form(state.fes_u, state.v, 1e-5, lumped=lumped, bilinear=density.bilinear).Assemble()
+    b = b_form(state.fes, state.u, 0.05, lumped=lumped, bilinear=density.bilinear).Assemble()
+    arrays = state.arrays
+    vector = LumpedAssembler(
+        arrays, a.mat, lumped, density.element_dofs(arrays), density.element_stiffness(arrays)
+    )
+    reference = a.mat.AsVector().FV().NumPy()
+    ours = vector.a_values(state.v_values, 1e-5)
+    np.testing.assert_allclose(ours, reference, atol=1e-12 * abs(reference).max())
+    scalar = LumpedAssembler(arrays, b.mat, lumped)
+    reference = b.mat.AsVector().FV().NumPy()
+    ours = scalar.b_values(density.density(arrays, state.u_values), 0.05)
+    np.testing.assert_allclose(ours, reference, atol=1e-12 * abs(reference).max())
+
+
+@pytest.mark.parametrize("model", ["plane_strain", "plane_stress"])
+def test_bulk_energy_equals_integrated_density(model):
+    # bulk = ∫ (P_j(v²) + η) W(u): W is constant per element, so the vertex rule is exact.
+    state = plane_state(model)
+    state.v.Set(0.5 + 0.3 * x * y)
+    state.u.Set(CF((x * x - y, 0.3 * x * y + y)))
+    density = state.elasticity.bilinear(state.u, state.u)
+    bulk = Integrate((state.v * state.v + 1e-5) * density * lumped_dx(), state.mesh)
+    assert state.energies()["bulk"] == pytest.approx(bulk, rel=1e-12)
+    exact = Integrate(density * exact_dx(), state.mesh)
+    W = state.elasticity.density(state.arrays, state.u_values)
+    assert np.dot(state.arrays.area, W) == pytest.approx(exact, rel=1e-12)
+
+
+@pytest.mark.parametrize("model", ["plane_strain", "plane_stress"])
+def test_homogeneous_strain_gives_the_homogeneous_damage(model):
+    # u = t ε x on Ω_D (interpolated 1e−9 inside its elements, so 1e−7 below): u stays affine,
+    # and v = α G_c/(α G_c + W) everywhere (∇v = 0), the AT2 minimiser of
+    # (v² + η) W + G_c α (1 − v)² over constants.
+    gc, t = 0.4, 1.5
+    state = plane_state(model, gc=gc, eps=0.1)
+    state.apply_load(t)
+    parameters = Parameters().replace(
+        model=model, adapt="fixed", nonlinear="am", am_tol=1e-12, gc=gc, eps=0.1
+    )
+    alternating_minimization(state, parameters.solver, parameters.adaptivity)
+    W = t**2 * textbook_density(model)
+    assert isinstance(state.elasticity, PlaneElasticity)
+    np.testing.assert_allclose(state.elasticity.density(state.arrays, state.u_values), W, rtol=1e-7)
+    alpha = state.model.alpha
+    v = alpha * gc / (alpha * gc + W)
+    np.testing.assert_allclose(state.v_values, v, rtol=1e-7)
+    area = 1.5**2
+    energies = state.energies()
+    assert energies["bulk"] == pytest.approx((v * v + state.model.eta) * W * area, rel=1e-7)
+    assert energies["surface"] == pytest.approx(gc * alpha * (1 - v) ** 2 * area, rel=1e-7)
+    # dI/dt at fixed v: 2 (v² + η) W / t |Ω|.
+    force = state.reaction_forces()["force"]
+    assert force == pytest.approx(2 * (v * v + state.model.eta) * W / t * area, rel=1e-7)
+
+
+def test_scalar_load_on_a_plane_model_is_refused():
+    from ngat.state import SceneError
+
+    with pytest.raises(SceneError, match="2"):
+        ATState(framed_square(), ModelParameters(model="plane_strain"), {"frame": lambda t: t * x})
+
+
+@pytest.mark.parametrize(
+    "values, word",
+    [
+        ({"model": "plane"}, "model"),
+        ({"poisson": 0.5}, "poisson"),
+        ({"young": -1.0}, "young"),
+        ({"gc": 0.0}, "gc"),
+        ({"model": "plane_strain"}, "nonlinear"),
+    ],
+)
+def test_bad_model_parameters_name_the_parameter(values, word):
+    from ngat.parameters import ParameterError
+
+    with pytest.raises(ParameterError, match=word):
+        Parameters().replace(**values)
