@@ -9,6 +9,9 @@ of a finished or partial run and writes PNGs into the folder:
   rendered off-screen by pyvista (matplotlib ``tripcolor`` where VTK cannot render off-screen);
 - ``mesh_final.png``: the edges of the last mesh; ``mesh_zoom.png``: a window around a crack tip.
 
+:func:`sweep_figure` draws the result columns of a sweep (``sweep.csv``) against a grid
+parameter, with axes labelled by name, meaning and unit.
+
 Whatever is missing (no CSV yet, rows cut short by a crash, VTUs named by ``fields.pvd`` but
 absent) is skipped with a log message. Matplotlib figures are built with ``Figure`` objects and
 never through ``pyplot``, so the caller's backend is left alone.
@@ -42,6 +45,7 @@ __all__ = [
     "read_energies",
     "field_series",
     "offscreen_rendering_works",
+    "sweep_figure",
     "PlotError",
 ]
 
@@ -526,3 +530,99 @@ def plot_mesh(
     ax.set_title(f"mesh at t = {t:g}: {len(triangles)} elements{where}")
     fig.savefig(path, dpi=DPI)
     return path
+
+
+PARAMETER_LABELS = {
+    "eps": "regularisation length ε [length]",
+    "eta": "residual stiffness η",
+    "crtol": "crack-set tolerance CRTOL",
+    "am_tol": "AM tolerance on max |Δv|",
+    "am_max_iter": "AM iterations per step at most",
+    "max_cg": "CG iterations before refactorising",
+    "omega": "over-relaxation factor ω",
+    "anderson_depth": "Anderson depth",
+    "newton_switch": "Newton switch on max |Δv|",
+    "maxh": "initial element size [length]",
+    "tol": "estimator tolerance TOL",
+    "tol_rel": "relative tolerance (TOL / I^½)",
+    "theta": "marking parameter θ",
+    "band_h": "crack-band element size [ε]",
+    "floor": "element floor [ε]",
+    "max_refinements": "refinements per step at most",
+    "irreversibility": "irreversibility",
+    "lumping": "mass lumping",
+    "nonlinear": "solver of a load step",
+    "linear_solver": "linear solver",
+    "bounded_v": "bounded v-step",
+    "adapt": "adaptivity",
+    "marking": "marking strategy",
+}
+"""Meaning and unit of the parameters a sweep varies (lengths in the scene's length unit)."""
+
+SWEEP_COLUMN_LABELS = {
+    "wall_s": "wall time [s]",
+    "steps": "load steps computed",
+    "t": "last load time t",
+    "bulk": "bulk energy at the last t",
+    "surface": "surface energy at the last t",
+    "total": "total energy I at the last t",
+    "fracture_time": "fracture time (first t with the body cut)",
+}
+"""Meaning and unit of the result columns of ``sweep.csv``."""
+
+
+def _axis_label(name: str, labels: dict[str, str]) -> str:
+    return f"{name}: {labels[name]}" if name in labels else name
+
+
+def sweep_figure(
+    rows: Sequence[dict[str, str]],
+    grid: dict[str, Sequence[str]],
+    x: str,
+    columns: Sequence[str],
+) -> Figure:
+    """Draw ``columns`` of a sweep's rows against the grid parameter ``x``, one panel each.
+
+    Each combination of the other grid parameters is one line. Numeric values of ``x`` are
+    placed by value (on a log axis when they span a factor of ten or more), others (``nonlinear``,
+    ``adapt``, ...) in grid order; empty cells (no fracture time) are left out.
+
+    Parameters
+    ----------
+    rows
+        Rows of ``sweep.csv`` (strings, as read by :class:`csv.DictReader`) of completed runs.
+    grid
+        The sweep's grid: parameter name → values.
+    x
+        Grid parameter on the horizontal axis.
+    columns
+        Numeric columns of the rows, one panel each.
+    """
+    try:
+        values = [float(v) for v in grid[x]]
+    except ValueError:
+        values = None
+    others = [name for name in grid if name != x]
+    groups: dict[str, list[dict[str, str]]] = {}
+    for row in rows:
+        groups.setdefault(", ".join(f"{n}={row[n]}" for n in others), []).append(row)
+    fig = Figure(figsize=(4.5 * len(columns), 3.6), layout="constrained")
+    axes = fig.subplots(1, len(columns), squeeze=False)[0]
+    for ax, column in zip(axes, columns, strict=True):
+        for label, group in groups.items():
+            cells = [(row[x], float(row[column])) for row in group if row[column] not in ("", None)]
+            if values is None:
+                rank = {str(v): i for i, v in enumerate(grid[x])}
+                cells.sort(key=lambda cell: rank.get(cell[0], len(rank)))
+            else:
+                cells = sorted((float(xv), y) for xv, y in cells)
+            if cells:
+                ax.plot(*zip(*cells, strict=True), "o-", label=label or None)
+        if values is not None and min(values) > 0 and max(values) >= 10 * min(values):
+            ax.set_xscale("log")
+        ax.set_xlabel(_axis_label(x, PARAMETER_LABELS))
+        ax.set_ylabel(_axis_label(column, SWEEP_COLUMN_LABELS))
+        ax.grid(True, lw=0.3, alpha=0.5)
+        if others and groups:
+            ax.legend(fontsize="small", frameon=False)
+    return fig
