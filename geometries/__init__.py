@@ -1,1 +1,1 @@
-"""ngat's scenes, one file each; ``ngat scenes`` lists them, ``ngat run NAME`` runs one."""
+"""ngat's scenes, one file each, installed as ``ngat.geometries``; ``ngat scenes`` lists them."""

@@ -20,8 +20,8 @@ import math
 import numpy as np
 from ngsolve import CF, IfPos, Parameter, atan2, cos, pi, sin, sqrt, x, y
 
-from geometries.surfing import CRACK_LENGTH, SLITS, geometry
 from ngat.elasticity import lame
+from ngat.geometries.surfing import CRACK_LENGTH, SLITS, geometry
 from ngat.scene import Scene
 
 YOUNG = 1.0

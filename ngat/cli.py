@@ -1,4 +1,4 @@
-"""Command line: ``ngat run SCENE``, ``ngat scenes``.
+"""Command line: ``ngat run SCENE``, ``ngat scenes``, ``ngat plot DIR``, ``ngat sweep``.
 
 Errors in the input (unknown scene, bad parameter, unwritable folder, a scene without Dirichlet
 region) print one line naming the problem and exit with status 2; any other exception is a bug
@@ -19,11 +19,11 @@ from rich.console import Console
 from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from ngat.checkpoint import finished_steps
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
+from ngat.experiment import pictures_on_exit, plan_run
 from ngat.minimization import ConvergenceError
-from ngat.output import OutputError, check_results_folder
+from ngat.output import OutputError
 from ngat.parameters import ParameterError
 from ngat.scene import SceneNotFound, SceneTimesError, load_scene, scene_names
 from ngat.state import SceneError
@@ -62,21 +62,21 @@ def parse_settings(items: list[str]) -> dict[str, str]:
 
 
 def command_run(args: argparse.Namespace, console: Console) -> int:
-    """Run one scene with a progress bar."""
-    scene = load_scene(args.scene)
-    parameters, times = scene.configure(args.quick, parse_settings(args.set))
+    """Run one scene with a progress bar; draw its pictures when it ends, however it ends."""
     if args.resume and (args.out or args.overwrite):
         raise ParameterError("--resume DIR names the results folder: leave out --out, --overwrite")
-    folder = Path(
-        args.resume or args.out or f"results/{scene.name}{'-quick' if args.quick else ''}"
+    plan = plan_run(
+        args.scene,
+        args.resume or args.out,
+        args.quick,
+        args.overwrite,
+        bool(args.resume),
+        parse_settings(args.set),
     )
-    mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
-    existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
-    if args.resume and existing.get("status") == "completed":
+    if plan.finished:
         if not args.quiet:
-            console.print(f"nothing to resume: the run in {folder} is complete")
+            console.print(f"nothing to resume: the run in {plan.folder} is complete")
         return 0
-    done = finished_steps(folder) if args.resume else 0
     columns = [
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -84,8 +84,13 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
         TextColumn("{task.fields[info]}"),
         TimeElapsedColumn(),
     ]
-    with Progress(*columns, console=console, disable=args.quiet, transient=True) as progress:
-        task = progress.add_task(scene.name, total=len(times), completed=done, info="")
+    with (
+        pictures_on_exit(plan.folder, plan.scene.slits, not args.no_plots),
+        Progress(*columns, console=console, disable=args.quiet, transient=True) as progress,
+    ):
+        task = progress.add_task(
+            plan.scene.name, total=len(plan.times), completed=plan.done, info=""
+        )
 
         def on_step(record: dict) -> None:
             info = (
@@ -94,12 +99,14 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             )
             progress.update(task, advance=1, info=info)
 
-        result = run(scene, parameters, times, folder, on_step=on_step, resume=bool(args.resume))
+        result = run(
+            plan.scene, plan.parameters, plan.times, plan.folder, on_step, resume=plan.resume
+        )
     if not args.quiet:
         final = result.summary["final"]
         console.print(
-            f"{scene.name}: {result.summary['steps']} steps, total energy {final['total']:.6g}, "
-            f"{result.summary['timing']['wall']:.1f} s → {folder}"
+            f"{plan.scene.name}: {result.summary['steps']} steps, total energy "
+            f"{final['total']:.6g}, {result.summary['timing']['wall']:.1f} s → {plan.folder}"
         )
     return 0
 
@@ -204,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p_run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
     p_run.add_argument("--quiet", action="store_true", help="no progress bar")
+    p_run.add_argument(
+        "--no-plots", action="store_true", help="no pictures when the run ends (see 'ngat plot')"
+    )
     p_run.set_defaults(handler=command_run)
     p_scenes = sub.add_parser("scenes", help="list the scenes")
     p_scenes.set_defaults(handler=command_scenes)

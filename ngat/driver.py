@@ -11,7 +11,6 @@ import logging
 import platform
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -33,34 +32,16 @@ from ngat.diagnostics import Diagnostics
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
+from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
 from ngat.timing import PhaseTimer
 
-__all__ = ["run", "RunResult"]
+__all__ = ["run"]
 
 log = logging.getLogger(__name__)
 
 StepCallback = Callable[[dict[str, Any]], None]
-
-
-@dataclass
-class RunResult:
-    """What a run leaves in memory besides its results folder.
-
-    Attributes
-    ----------
-    records
-        One dictionary per load step (the rows of ``energies.csv``).
-    summary
-        The content of ``summary.json``.
-    state
-        The final fields and mesh.
-    """
-
-    records: list[dict[str, Any]] = field(default_factory=list)
-    summary: dict[str, Any] = field(default_factory=dict)
-    state: ATState | None = None
 
 
 def versions() -> dict[str, str]:
@@ -124,7 +105,7 @@ def run(
     Returns
     -------
     RunResult
-        Records, summary and the final state.
+        Records, summary, the final state and the folder.
     """
     # One NGSolve thread: with more, the sparse Cholesky factorisation adds in an order that
     # varies from run to run, so runs (and resumed runs) would not repeat bit for bit; on two
@@ -133,7 +114,7 @@ def run(
     timer = PhaseTimer()
     checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
     writer = ResultsWriter(folder, append=checkpoint is not None)
-    result = RunResult()
+    result = RunResult(folder=Path(folder))
     summary = result.summary
     summary.update(
         scene=scene.name,

@@ -9,6 +9,9 @@ of a finished or partial run and writes PNGs into the folder:
   rendered off-screen by pyvista (matplotlib ``tripcolor`` where VTK cannot render off-screen);
 - ``mesh_final.png``: the edges of the last mesh; ``mesh_zoom.png``: a window around a crack tip.
 
+:func:`sweep_figure` draws the result columns of a sweep (``sweep.csv``) against a grid
+parameter, with axes labelled by name, meaning and unit.
+
 Whatever is missing (no CSV yet, rows cut short by a crash, VTUs named by ``fields.pvd`` but
 absent) is skipped with a log message. Matplotlib figures are built with ``Figure`` objects and
 never through ``pyplot``, so the caller's backend is left alone.
@@ -16,16 +19,12 @@ never through ``pyplot``, so the caller's backend is left alone.
 
 from __future__ import annotations
 
-import csv
 import functools
 import json
 import logging
 import subprocess
 import sys
-import warnings
-import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -36,12 +35,13 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from ngat.crack import crack_tips, mesh_edges
+from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
     "plot_results",
     "read_energies",
-    "field_series",
     "offscreen_rendering_works",
+    "sweep_figure",
     "PlotError",
 ]
 
@@ -60,88 +60,24 @@ class PlotError(ValueError):
     """The folder holds nothing to plot."""
 
 
-@dataclass(frozen=True)
-class Frame:
-    """One stored step of the VTK series: its step number, load time and VTU file."""
-
-    step: int
-    t: float
-    path: Path
-
-
-TEXT_COLUMNS = {"warnings"}
-
-
 def read_energies(path: Path) -> dict[str, np.ndarray]:
-    """Return the columns of ``energies.csv`` as float arrays, keeping only complete rows.
+    """Return the numeric columns of ``energies.csv`` as float arrays, complete rows only.
 
-    A row is complete when every numeric column has a value; a crash while a row is written
-    leaves an incomplete last row, which is dropped. ``True``/``False`` become 1/0; text columns
-    (``warnings``) are left out.
+    Rows cut short by a crash are dropped (:func:`ngat.results.read_records`); ``True``/``False``
+    become 1/0; text columns (``warnings``) are left out.
 
     Parameters
     ----------
     path
         The CSV file.
     """
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        columns = [c for c in reader.fieldnames or [] if c not in TEXT_COLUMNS]
-        rows = []
-        for row in reader:
-            try:
-                rows.append([_number(row[c]) for c in columns])
-            except (TypeError, ValueError):
-                log.info("%s: skipping an incomplete row %s", path, row.get("step"))
-    table = np.array(rows, dtype=float).reshape(len(rows), len(columns))
-    return {c: table[:, i] for i, c in enumerate(columns)}
-
-
-def _number(text: str | None) -> float:
-    if text in ("True", "False"):
-        return float(text == "True")
-    return float(text)
-
-
-def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) -> list[Frame]:
-    """Return the stored steps whose VTU exists, in load order.
-
-    ``fields.pvd`` gives the load times; without it the VTUs are found by name
-    (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the step number
-    stands in for t when there is no such row).
-
-    Parameters
-    ----------
-    folder
-        Results folder.
-    energies
-        Columns of ``energies.csv``, if read.
-    """
-    folder = Path(folder)
-    frames = []
-    pvd = folder / "fields.pvd"
-    if pvd.exists():
-        for dataset in ET.parse(pvd).getroot().iter("DataSet"):
-            path = folder / dataset.get("file")
-            frames.append(Frame(_step_of(path), float(dataset.get("timestep")), path))
-    else:
-        times = {}
-        if energies is not None and "step" in energies and "t" in energies:
-            times = dict(zip(energies["step"].astype(int).tolist(), energies["t"], strict=True))
-        for path in sorted((folder / "fields").glob("step_*.vtu")):
-            step = _step_of(path)
-            frames.append(Frame(step, float(times.get(step, step)), path))
-    missing = [f.path.name for f in frames if not f.path.exists()]
-    if missing:
-        log.info("%s: %d VTU files named but absent (%s ...)", folder, len(missing), missing[0])
-    return [f for f in frames if f.path.exists()]
-
-
-def _step_of(path: Path) -> int:
-    try:
-        return int(path.stem.rsplit("_", 1)[-1])
-    except ValueError:
-        return -1
+    records = read_records(path)
+    columns = {}
+    for name in records[0] if records else ():
+        values = [record[name] for record in records]
+        if all(isinstance(value, bool | int | float) for value in values):
+            columns[name] = np.array(values, dtype=float)
+    return columns
 
 
 @functools.cache
@@ -174,6 +110,9 @@ def plot_results(
     renderer: str = "auto",
 ) -> list[Path]:
     """Draw the pictures of a finished or partial results folder.
+
+    The ``v_t*.png`` of an earlier call are removed first, so the folder holds one set of
+    snapshots, that of the last call.
 
     Parameters
     ----------
@@ -217,20 +156,22 @@ def plot_results(
     frames = field_series(folder, energies) if folder.is_dir() else []
     if not written and not frames:
         raise PlotError(f"'{folder}' holds no energies.csv rows and no fields to plot")
+    for old in folder.glob("v_t*.png"):
+        old.unlink()
     if not frames:
         return written
     if renderer == "auto":
         renderer = "pyvista" if offscreen_rendering_works() else "matplotlib"
         if renderer == "matplotlib":
             log.warning("VTK cannot render off-screen here: drawing v with matplotlib")
-    while frames and (grid := _read(frames[-1])) is None:
+    while frames and (grid := read_fields(frames[-1])) is None:
         frames.pop()
     if not frames:
         return written
     final = frames[-1]
     written.append(plot_field(grid, final.t, folder / "v_final.png", renderer))
     for frame in _chosen_frames(frames[:-1], times):
-        if (snapshot := _read(frame)) is not None:
+        if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
             written.append(plot_field(snapshot, frame.t, path, renderer))
     points, triangles = _triangles(grid)
@@ -241,21 +182,6 @@ def plot_results(
     written.append(plot_mesh(points, triangles, v, final.t, folder / "mesh_zoom.png", zoom))
     log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
     return written
-
-
-def _read(frame: Frame) -> pyvista.UnstructuredGrid | None:
-    """Return the frame's grid, or ``None`` if the VTU is unreadable (cut short by a crash)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            grid = pyvista.read(frame.path)
-        except Exception as error:  # VTK readers raise many kinds of errors
-            log.info("%s: unreadable (%s)", frame.path, error)
-            return None
-    if grid.n_cells == 0 or "v" not in grid.point_data:
-        log.info("%s: no cells or no field v; skipped", frame.path)
-        return None
-    return grid
 
 
 def _chosen_frames(frames: list[Frame], times: Sequence[float] | None) -> list[Frame]:
@@ -358,7 +284,8 @@ def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: s
     points, triangles = _triangles(grid)
     xmin, ymin = points.min(axis=0)
     xmax, ymax = points.max(axis=0)
-    fig = Figure(figsize=(7, 7 * (ymax - ymin) / (xmax - xmin)), layout="constrained")
+    # 0.6 in more than the body for the title and the tick labels (a flat body lost its title).
+    fig = Figure(figsize=(7, 7 * (ymax - ymin) / (xmax - xmin) + 0.6), layout="constrained")
     ax = fig.subplots()
     image = ax.tripcolor(
         Triangulation(points[:, 0], points[:, 1], triangles),
@@ -526,3 +453,99 @@ def plot_mesh(
     ax.set_title(f"mesh at t = {t:g}: {len(triangles)} elements{where}")
     fig.savefig(path, dpi=DPI)
     return path
+
+
+PARAMETER_LABELS = {
+    "eps": "regularisation length ε [length]",
+    "eta": "residual stiffness η",
+    "crtol": "crack-set tolerance CRTOL",
+    "am_tol": "AM tolerance on max |Δv|",
+    "am_max_iter": "AM iterations per step at most",
+    "max_cg": "CG iterations before refactorising",
+    "omega": "over-relaxation factor ω",
+    "anderson_depth": "Anderson depth",
+    "newton_switch": "Newton switch on max |Δv|",
+    "maxh": "initial element size [length]",
+    "tol": "estimator tolerance TOL",
+    "tol_rel": "relative tolerance (TOL / I^½)",
+    "theta": "marking parameter θ",
+    "band_h": "crack-band element size [ε]",
+    "floor": "element floor [ε]",
+    "max_refinements": "refinements per step at most",
+    "irreversibility": "irreversibility",
+    "lumping": "mass lumping",
+    "nonlinear": "solver of a load step",
+    "linear_solver": "linear solver",
+    "bounded_v": "bounded v-step",
+    "adapt": "adaptivity",
+    "marking": "marking strategy",
+}
+"""Meaning and unit of the parameters a sweep varies (lengths in the scene's length unit)."""
+
+SWEEP_COLUMN_LABELS = {
+    "wall_s": "wall time [s]",
+    "steps": "load steps computed",
+    "t": "last load time t",
+    "bulk": "bulk energy at the last t",
+    "surface": "surface energy at the last t",
+    "total": "total energy I at the last t",
+    "fracture_time": "fracture time (first t with the body cut)",
+}
+"""Meaning and unit of the result columns of ``sweep.csv``."""
+
+
+def _axis_label(name: str, labels: dict[str, str]) -> str:
+    return f"{name}: {labels[name]}" if name in labels else name
+
+
+def sweep_figure(
+    rows: Sequence[dict[str, str]],
+    grid: dict[str, Sequence[str]],
+    x: str,
+    columns: Sequence[str],
+) -> Figure:
+    """Draw ``columns`` of a sweep's rows against the grid parameter ``x``, one panel each.
+
+    Each combination of the other grid parameters is one line. Numeric values of ``x`` are
+    placed by value (on a log axis when they span a factor of ten or more), others (``nonlinear``,
+    ``adapt``, ...) in grid order; empty cells (no fracture time) are left out.
+
+    Parameters
+    ----------
+    rows
+        Rows of ``sweep.csv`` (strings, as read by :class:`csv.DictReader`) of completed runs.
+    grid
+        The sweep's grid: parameter name → values.
+    x
+        Grid parameter on the horizontal axis.
+    columns
+        Numeric columns of the rows, one panel each.
+    """
+    try:
+        values = [float(v) for v in grid[x]]
+    except ValueError:
+        values = None
+    others = [name for name in grid if name != x]
+    groups: dict[str, list[dict[str, str]]] = {}
+    for row in rows:
+        groups.setdefault(", ".join(f"{n}={row[n]}" for n in others), []).append(row)
+    fig = Figure(figsize=(4.5 * len(columns), 3.6), layout="constrained")
+    axes = fig.subplots(1, len(columns), squeeze=False)[0]
+    for ax, column in zip(axes, columns, strict=True):
+        for label, group in groups.items():
+            cells = [(row[x], float(row[column])) for row in group if row[column] not in ("", None)]
+            if values is None:
+                rank = {str(v): i for i, v in enumerate(grid[x])}
+                cells.sort(key=lambda cell: rank.get(cell[0], len(rank)))
+            else:
+                cells = sorted((float(xv), y) for xv, y in cells)
+            if cells:
+                ax.plot(*zip(*cells, strict=True), "o-", label=label or None)
+        if values is not None and min(values) > 0 and max(values) >= 10 * min(values):
+            ax.set_xscale("log")
+        ax.set_xlabel(_axis_label(x, PARAMETER_LABELS))
+        ax.set_ylabel(_axis_label(column, SWEEP_COLUMN_LABELS))
+        ax.grid(True, lw=0.3, alpha=0.5)
+        if others and groups:
+            ax.legend(fontsize="small", frameon=False)
+    return fig

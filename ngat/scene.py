@@ -1,8 +1,9 @@
 """Scenes: geometry, Dirichlet regions with their load g(x, t), load times, parameter changes.
 
-A scene is one Python file that defines ``scene = Scene(...)``. The package's scenes live in the
-``geometries`` folder and are found by name (``two-slits`` → ``geometries/two_slits.py``); any
-other file is found by its path. A scene states only what differs from the defaults.
+A scene is one Python file that defines ``scene = Scene(...)``. The package's scenes are the
+subpackage :mod:`ngat.geometries` (the repository's ``geometries`` folder) and are found by name
+(``two-slits`` → ``geometries/two_slits.py``); any other file is found by its path. A scene
+states only what differs from the defaults.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 import ngsolve
 import numpy as np
 
+from ngat import geometries
 from ngat.geometry import generate_mesh
 from ngat.parameters import Parameters
 from ngat.state import SceneError
@@ -31,7 +33,7 @@ __all__ = [
     "SceneTimesError",
 ]
 
-GEOMETRIES = Path(__file__).resolve().parent.parent / "geometries"
+GEOMETRIES = Path(geometries.__file__).resolve().parent
 
 
 class SceneNotFound(LookupError):

@@ -8,7 +8,7 @@ its error and does not stop the others. ``sweep.csv`` collects one row per run (
 status, wall time, final energies, fracture time) and is rewritten atomically whenever a run
 ends. Re-running a sweep skips the runs whose ``summary.json`` says ``completed`` (same scene and
 parameters) and resumes interrupted ones from their checkpoint. :func:`plot_sweep` draws
-columns of ``sweep.csv`` against a grid parameter.
+columns of ``sweep.csv`` against a grid parameter (:func:`ngat.plotting.sweep_figure`).
 
 With a remote scheduler, the workers need ngat installed and the sweep folder (and a scene file
 given by path) at the same path, e.g. on a shared file system.
@@ -342,12 +342,8 @@ def plot_sweep(
     ParameterError
         If ``x`` is not a grid parameter or a column is not in ``sweep.csv``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ngat.output import OutputError
+    from ngat.plotting import sweep_figure
 
     folder = Path(folder)
     try:
@@ -365,25 +361,6 @@ def plot_sweep(
         if column not in known:
             raise ParameterError(f"--y '{column}' is not a column of sweep.csv: use one of {known}")
     done = [row for row in table if row["status"] == "completed"]
-    others = [name for name in grid if name != x]
-    groups: dict[str, list[dict[str, str]]] = {}
-    for row in done:
-        label = ", ".join(f"{name}={row[name]}" for name in others)
-        groups.setdefault(label, []).append(row)
-    fig, axes = plt.subplots(1, len(columns), figsize=(4.5 * len(columns), 3.6), squeeze=False)
-    for ax, column in zip(axes[0], columns, strict=True):
-        for label, rows in groups.items():
-            points = sorted(
-                (float(r[x]), float(r[column])) for r in rows if r[column] not in ("", None)
-            )
-            if points:
-                ax.plot(*zip(*points, strict=True), "o-", label=label or None)
-        ax.set_xlabel(x)
-        ax.set_ylabel(column)
-        if any(groups):
-            ax.legend(fontsize="small")
-    fig.tight_layout()
     path = Path(path) if path else folder / f"sweep_{'_'.join(columns)}_vs_{x}.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    sweep_figure(done, grid, x, columns).savefig(path, dpi=120)
     return path

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from ngsolve import CF, Grad, InnerProduct, Integrate, Trace, dx, x, y
 
-from geometries import surfing_mode_i as mode_i
+from ngat.geometries import surfing_mode_i as mode_i
 from ngat.minimization import estimate
 from ngat.parameters import ModelParameters
 from ngat.refinement import dorfler_marking, refine

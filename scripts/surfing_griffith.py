@@ -6,11 +6,11 @@ effective toughness G_eff(h) = 1 + h/(4ε) + (h/ε)²/32 of a crack band one ele
 frame Ω_D carries the mode-III tip field U = A sqrt(2r/π) sin(θ/2), energy release rate G = A².
 
 (a) Critical amplitude: the tip field stays at the pre-crack's tip (V = 0) and A is ramped;
-    the crack starts to grow at A_c² (:func:`geometries.surfing.onset`), which should equal
+    the crack starts to grow at A_c² (:func:`ngat.geometries.surfing.onset`), which should equal
     G_eff(h) within 3 %.
 (b) Steady propagation: A² = 1.2 G_eff(h) and the tip field moves at V; after a transient the
     crack tip moves at V and the surface energy grows at G_eff per unit crack advance
-    (:func:`geometries.surfing.steady_rates`), within 2 %.
+    (:func:`ngat.geometries.surfing.steady_rates`), within 2 %.
 
 h is the side of the squares of the structured band along the crack path (the spacing of the
 node lines parallel to the crack); the mesh is fixed (``adapt=fixed``). Both measures carry a
@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from geometries import surfing
 from ngat.driver import run
+from ngat.geometries import surfing
 from ngat.parameters import Parameters
 
 R = surfing.HEIGHT / 2 - surfing.FRAME

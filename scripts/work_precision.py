@@ -28,7 +28,7 @@ reference (``geometries/reference/<scene>.json``, ``scripts/reference_two_slits.
   t ≤ 1.4 before either run breaks (once the cracks have joined, a slit's tip is measured on
   the other slit's side), the larger over the slits;
 - ``toughness`` (surfing): |dS/da − 1|, dS/da the surface energy per unit crack advance while
-  the crack runs (t ≥ 0.5, :func:`geometries.surfing.steady_rates`) and 1 = G_c, the toughness
+  the crack runs (t ≥ 0.5, :func:`ngat.geometries.surfing.steady_rates`) and 1 = G_c, the toughness
   of the continuous AT functional; a crack that does not run (tip speed < V/2) has no value.
 
 Output in ``--out`` (default ``results/work_precision``): ``work_precision.csv`` (one row per
@@ -141,7 +141,7 @@ def path_distance(steps: dict, reference: dict, until: float = 1.4) -> float:
 
 def toughness(steps: dict, speed: float) -> float:
     """Return dS/da over t ≥ :data:`SURFING_WINDOW`, NaN if the crack does not run."""
-    from geometries.surfing import steady_rates
+    from ngat.geometries.surfing import steady_rates
 
     t = np.asarray(steps["t"])
     keep = t >= SURFING_WINDOW - 1e-9
@@ -167,7 +167,7 @@ def errors(scene_name: str, case: dict, reference: dict) -> dict:
     breaks = [t for t in (case["fracture_time"], reference["fracture_time"]) if t is not None]
     result["crack_path"] = path_distance(steps, ref, until=min([1.4] + breaks) - 1e-6)
     if scene_name == "surfing":
-        from geometries.surfing import SPEED
+        from ngat.geometries.surfing import SPEED
 
         result["toughness"] = abs(toughness(steps, SPEED) - 1)
     else:

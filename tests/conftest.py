@@ -35,3 +35,15 @@ def quick_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("two-slits-quick")
     result = run(scene, parameters, times, folder, on_step=log.on_step, monitor=log.monitor)
     return result, log, folder
+
+
+@pytest.fixture(scope="session")
+def tiny_run():
+    """A tiny run of the two-slits geometry, as ``(scene, parameters)`` for ``ngat.run``.
+
+    Five load steps on the coarse initial mesh (adapt=fixed): about a second.
+    """
+    import dataclasses
+
+    scene = dataclasses.replace(load_scene("two-slits"), times=[0.0, 0.4, 0.8, 1.2, 1.6])
+    return scene, {"maxh": 0.5, "eps": 0.2, "adapt": "fixed"}

@@ -28,7 +28,7 @@ SCENE = """
 
     import numpy as np
 
-    from geometries.two_slits import scene as base
+    from ngat.geometries.two_slits import scene as base
 
     scene = dataclasses.replace(
         base,

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from ngsolve import H1, GridFunction
 
-from geometries.two_slits import SLITS
 from ngat.crack import components, connects, crack_tips, mesh_edges
 from ngat.forms import MeshArrays
+from ngat.geometries.two_slits import SLITS
 from ngat.scene import load_scene
 
 

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from geometries.obtuse_line import scene as OBTUSE
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
+from ngat.geometries.obtuse_line import scene as OBTUSE
 from ngat.minimization import ConvergenceError
 from ngat.parameters import ParameterError
 from ngat.scene import load_scene

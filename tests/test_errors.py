@@ -19,22 +19,22 @@ SCENE_FILES = {
     "failing.py": "import no_such_module_here\n",
     "times.py": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
         scene = dataclasses.replace(base, name="bad-times", times=[0.0, 0.2, 0.2])
         """,
     "no_region.py": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
         scene = dataclasses.replace(base, name="no-region", loads={})
         """,
     "wrong_face.py": """
         import dataclasses
-        from geometries.two_slits import scene as base
+        from ngat.geometries.two_slits import scene as base
         scene = dataclasses.replace(base, name="wrong-face", loads={"bottom": lambda t: t})
         """,
     "wrong_material.py": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
         scene = dataclasses.replace(base, name="wrong-material", loads={"nowhere": lambda t: t})
         """,
 }

@@ -29,9 +29,9 @@ from ngsolve import (
     y,
 )
 
-from geometries.smooth_laplace import exact_gradient as smooth_gradient
 from ngat.estimators import EdgeTopology, meets, mu_estimator, nu_estimator
 from ngat.forms import MeshArrays
+from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
 from ngat.parameters import ModelParameters
 from ngat.refinement import dorfler_marking
 from ngat.scene import load_scene

@@ -11,9 +11,9 @@ line although the mesh satisfies Hypothesis A.
 import numpy as np
 import pytest
 
-from geometries.obtuse_line import scene as obtuse
-from geometries.profile_1d import aligned_mesh
-from geometries.profile_1d import scene as profile
+from ngat.geometries.obtuse_line import scene as obtuse
+from ngat.geometries.profile_1d import aligned_mesh
+from ngat.geometries.profile_1d import scene as profile
 from ngat.parameters import ModelParameters
 from ngat.state import ATState
 

@@ -9,8 +9,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from geometries.profile_1d import HALF_HEIGHT, LENGTH
 from ngat.driver import run
+from ngat.geometries.profile_1d import HALF_HEIGHT, LENGTH
 from ngat.scene import load_scene
 
 EPS = 0.05

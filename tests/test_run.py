@@ -102,7 +102,7 @@ def test_proposition_3_without_bounds_on_a_nonobtuse_mesh():
     # so the bounded v-step never has to hold a DOF at a bound.
     from ngsolve import x
 
-    from geometries.profile_1d import aligned_mesh
+    from ngat.geometries.profile_1d import aligned_mesh
     from ngat.parameters import ModelParameters
     from ngat.state import ATState
 

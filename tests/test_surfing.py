@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from ngsolve import Integrate
 
-from geometries import surfing
+from ngat.geometries import surfing
 from ngat.parameters import ModelParameters
 from ngat.state import ATState
 

@@ -69,7 +69,7 @@ def test_a_run_failing_at_run_time_does_not_stop_the_others(tmp_path, scheduler)
         textwrap.dedent(
             """
             import dataclasses
-            from geometries.profile_1d import aligned_mesh, scene as base
+            from ngat.geometries.profile_1d import aligned_mesh, scene as base
 
             def mesh(maxh):
                 if maxh < 0.07:
