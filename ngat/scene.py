@@ -17,7 +17,7 @@ from typing import Any
 import ngsolve
 import numpy as np
 
-from ngat.geometry import generate_mesh
+from ngat.geometry import check_mesh_size, generate_mesh
 from ngat.parameters import Parameters
 from ngat.state import SceneError
 
@@ -94,12 +94,13 @@ class Scene:
             return self.mesh(maxh)
         return generate_mesh(self.geometry(), maxh)
 
-    def check(self) -> None:
+    def check(self, maxh: float | None = None) -> None:
         """Raise :class:`~ngat.state.SceneError` if a Dirichlet region is missing.
 
         That is: the scene has no Dirichlet region, or its geometry has no face of a Dirichlet
-        region's name. Scenes with their own ``mesh`` builder are checked on the mesh, by
-        :class:`~ngat.state.ATState`.
+        region's name, or ``maxh`` (if given) asks for too many triangles
+        (:func:`~ngat.geometry.check_mesh_size`). Scenes with their own ``mesh`` builder are
+        checked on the mesh, by :class:`~ngat.state.ATState`.
         """
         if not self.loads:
             raise SceneError(
@@ -107,13 +108,16 @@ class Scene:
             )
         if self.mesh is not None or self.geometry is None:
             return
-        faces = {face.name for face in self.geometry().faces}
+        shape = self.geometry()
+        faces = {face.name for face in shape.faces}
         missing = sorted(set(self.loads) - faces)
         if missing:
             raise SceneError(
                 f"scene '{self.name}': Dirichlet region(s) {missing} are not faces of the "
                 f"geometry (faces: {sorted(faces)}); name the OCC faces accordingly"
             )
+        if maxh is not None:
+            check_mesh_size(shape, maxh)
 
     def configure(
         self, quick: bool = False, overrides: Mapping[str, Any] | None = None
@@ -145,8 +149,9 @@ class Scene:
         changes.update(overrides or {})
         times = np.asarray(times, dtype=float)
         check_times(self.name, times)
-        self.check()
-        return Parameters().replace(**changes), times
+        parameters = Parameters().replace(**changes)
+        self.check(parameters.adaptivity.maxh)
+        return parameters, times
 
 
 def check_times(name: str, times: np.ndarray) -> None:
