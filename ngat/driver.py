@@ -28,8 +28,8 @@ from ngat.checkpoint import (
     restore_state,
     save_checkpoint,
 )
-from ngat.crack import connects, crack_tips
-from ngat.diagnostics import Diagnostics
+from ngat.crack import check_slits, connects, crack_tips
+from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
@@ -162,6 +162,9 @@ def run(
             mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
             solver.bounded_v, solver.linear_solver,
         )  # fmt: skip
+        check_slits(mesh, scene.slits, scene.name)
+        if parameters.adaptivity.adapt == "fixed" and parameters.adaptivity.resolve_eps:
+            check_fixed_mesh(state, scene.slits, parameters.model.eps)
         if checkpoint is not None:
             restore_state(state, checkpoint)
             result.records.extend(checkpoint.records)
