@@ -126,8 +126,8 @@ def run(
     RunResult
         Records, summary and the final state.
     """
-    timer = PhaseTimer()
     checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
+    timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
     writer = ResultsWriter(folder, append=checkpoint is not None)
     result = RunResult()
     summary = result.summary
@@ -215,6 +215,7 @@ def run(
             with timer("output"):
                 writer.write_step(record, mesh, {"u": state.u, "v": state.v})
             result.records.append(record)
+            summary["timing"] = timer.summary()
             with timer("checkpoint"):
                 save_checkpoint(folder, state, k, result.records, summary)
             log.info(
