@@ -51,5 +51,6 @@ scene = Scene(
     loads={"grip": lambda t: -1 * t, "pull": lambda t: 1 * t},
     times=[0.0],
     crack=on_line,
-    parameters={"maxh": 0.05, "adapt": "fixed"},
+    # The sheared elements are 0.21 long, wider than ε: the angles, not ε, are under study.
+    parameters={"maxh": 0.05, "adapt": "fixed", "resolve_eps": False},
 )

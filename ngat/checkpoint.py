@@ -31,7 +31,13 @@ from typing import Any
 import ngsolve
 import numpy as np
 
-from ngat.output import OutputError, check_results_folder, times_summary, write_atomic
+from ngat.output import (
+    CHECKPOINT,
+    OutputError,
+    check_results_folder,
+    times_summary,
+    write_atomic,
+)
 from ngat.state import ATState
 
 __all__ = [
@@ -48,8 +54,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-CHECKPOINT = "checkpoint.npz"
 
 
 @dataclass

@@ -19,13 +19,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import ngsolve
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ngat.forms import MeshArrays, mesh_edges
+from ngat.state import SceneError
 
-__all__ = ["Slit", "mesh_edges", "components", "crack_tips", "connects"]
+__all__ = ["Slit", "mesh_edges", "components", "crack_tips", "connects", "check_slits"]
 
 Slit = tuple[tuple[float, float], tuple[float, float]]
 """A slit as a segment ``((x_mouth, y_mouth), (x_tip, y_tip))``."""
@@ -161,3 +163,19 @@ def connects(
     a = labels[np.asarray(region_a, dtype=bool) & (labels >= 0)]
     b = labels[np.asarray(region_b, dtype=bool) & (labels >= 0)]
     return bool(np.intersect1d(a, b).size)
+
+
+def check_slits(mesh: ngsolve.Mesh, slits: Sequence[Slit], scene: str) -> None:
+    """Raise :class:`~ngat.state.SceneError` if a slit's mouth or tip lies outside the mesh.
+
+    A slit outside the domain has no crack to measure: its tip would be reported at the given
+    point whatever happens.
+    """
+    for i, slit in enumerate(slits, start=1):
+        for end, (x, y) in zip(("mouth", "tip"), slit, strict=True):
+            if not mesh.Contains(x, y):
+                raise SceneError(
+                    f"scene '{scene}': the {end} ({x:g}, {y:g}) of slit {i} lies outside the "
+                    "domain: fix 'slits' in the scene (mouth on the boundary, tip inside, on a "
+                    "slit drawn in the geometry)"
+                )

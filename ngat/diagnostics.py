@@ -16,14 +16,24 @@ warning (logged, listed in ``summary.json`` under ``diagnostics`` and in the ste
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from ngat.crack import Slit
 from ngat.minimization import StepResult
+from ngat.parameters import ParameterError
 from ngat.state import ATState
 
-__all__ = ["Diagnostics", "ProblemError", "ROUND_OFF", "damage_zone"]
+__all__ = [
+    "Diagnostics",
+    "ProblemError",
+    "ROUND_OFF",
+    "damage_zone",
+    "crack_start",
+    "check_fixed_mesh",
+]
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +60,39 @@ def damage_zone(v: np.ndarray, elements: np.ndarray) -> tuple[np.ndarray, str]:
     if v_min >= 0.9:
         return np.zeros(len(elements), dtype=bool), ""
     return (near <= v_min).any(axis=1), f"at the most damaged point (min v = {v_min:.3g})"
+
+
+def crack_start(state: ATState, slits: Sequence[Slit]) -> tuple[np.ndarray, str]:
+    """Return the elements where a crack starts, and where they are (for the message).
+
+    These are the elements at the vertex nearest to each slit's tip and those meeting the
+    scene's imposed crack; a scene with neither may crack anywhere, so then every element.
+    """
+    arrays = state.arrays
+    start = state.initial_crack[arrays.elements].any(axis=1)
+    for _, tip in slits:
+        nearest = np.argmin(np.linalg.norm(arrays.coords - np.asarray(tip, dtype=float), axis=1))
+        start |= (arrays.elements == nearest).any(axis=1)
+    if start.any():
+        return start, "where the crack starts"
+    return np.ones(len(arrays.elements), dtype=bool), "of the mesh"
+
+
+def check_fixed_mesh(state: ATState, slits: Sequence[Slit], eps: float) -> None:
+    """Raise :class:`~ngat.parameters.ParameterError` if a fixed mesh cannot resolve ε.
+
+    ``adapt="fixed"`` never refines, so the elements where the crack starts
+    (:func:`crack_start`) must already be narrower than ε, the criterion of
+    ``eps-under-resolved``.
+    """
+    zone, where = crack_start(state, slits)
+    h = float(state.arrays.diameter[zone].max())
+    if h >= eps:
+        raise ParameterError(
+            f"adapt=fixed never refines, but the elements {where} are up to h = {h:.3g} ≥ "
+            f"ε = {eps:g} wide: choose maxh below {eps:g} or adapt=band, or set "
+            "resolve_eps=false to run under-resolved on purpose"
+        )
 
 
 class Diagnostics:

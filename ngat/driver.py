@@ -15,7 +15,6 @@ from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
-import ngsolve
 import numpy as np
 
 from ngat import __version__
@@ -27,14 +26,15 @@ from ngat.checkpoint import (
     restore_state,
     save_checkpoint,
 )
-from ngat.crack import connects, crack_tips
-from ngat.diagnostics import Diagnostics
+from ngat.crack import check_slits, connects, crack_tips
+from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
+from ngat.threads import FixedThreads
 from ngat.timing import PhaseTimer
 
 __all__ = ["run"]
@@ -107,12 +107,8 @@ def run(
     RunResult
         Records, summary, the final state and the folder.
     """
-    # One NGSolve thread: with more, the sparse Cholesky factorisation adds in an order that
-    # varies from run to run, so runs (and resumed runs) would not repeat bit for bit; on two
-    # cores one thread was also faster (0.042 s against 0.075 s per half-step at 30k DOFs).
-    ngsolve.SetNumThreads(1)
-    timer = PhaseTimer()
     checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
+    timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
     writer = ResultsWriter(folder, append=checkpoint is not None)
     result = RunResult(folder=Path(folder))
     summary = result.summary
@@ -133,7 +129,9 @@ def run(
     writer.write_summary(summary)
     diagnostics = Diagnostics(parameters.solver.on_problem)
     diagnostics.problems.extend(summary.get("diagnostics", []))
+    threads = FixedThreads()
     try:
+        summary["threads"] = threads.summary()
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
             if checkpoint is not None:
@@ -143,6 +141,9 @@ def run(
             mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
             solver.bounded_v, solver.linear_solver,
         )  # fmt: skip
+        check_slits(mesh, scene.slits, scene.name)
+        if parameters.adaptivity.adapt == "fixed" and parameters.adaptivity.resolve_eps:
+            check_fixed_mesh(state, scene.slits, parameters.model.eps)
         if checkpoint is not None:
             restore_state(state, checkpoint)
             result.records.extend(checkpoint.records)
@@ -195,6 +196,7 @@ def run(
             with timer("output"):
                 writer.write_step(record, mesh, {"u": state.u, "v": state.v})
             result.records.append(record)
+            summary["timing"] = timer.summary()
             with timer("checkpoint"):
                 save_checkpoint(folder, state, k, result.records, summary)
             log.info(
@@ -221,6 +223,7 @@ def run(
             summary["final"].update(elements=last["elements"], h_min=last["h_min"])
         summary["timing"] = timer.summary()
         summary["diagnostics"] = diagnostics.summary()
+        threads.restore()
         writer.write_summary(summary)
         writer.close()
     return result

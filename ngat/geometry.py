@@ -9,6 +9,7 @@ Section 1.3: a slit domain is a polyhedral domain in the paper's sense).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import netgen.meshing as ngm
@@ -18,7 +19,20 @@ from netgen.occ import Glue, OCCGeometry, Rectangle, WorkPlane
 
 from ngat.state import SceneError
 
-__all__ = ["polygon_face", "rectangle", "glue", "generate_mesh", "split_slit_mouths"]
+__all__ = [
+    "polygon_face",
+    "rectangle",
+    "glue",
+    "generate_mesh",
+    "split_slit_mouths",
+    "check_mesh_size",
+    "unmeshed_edges",
+    "MAX_ELEMENTS",
+]
+
+MAX_ELEMENTS = 10**7
+"""Initial triangles at most. The initial mesh is meant to be coarse (adaptivity refines where
+the crack is); a maxh that asks for more is a slip, and Netgen would fail or run out of memory."""
 
 
 def polygon_face(points: Sequence[tuple[float, float]], name: str):
@@ -75,9 +89,16 @@ def generate_mesh(shape, maxh: float) -> ngsolve.Mesh:
     Raises
     ------
     SceneError
-        If a face of the shape got no elements.
+        If ``maxh`` asks for more than :data:`MAX_ELEMENTS` triangles, if Netgen left part of
+        the shape unmeshed (it does so without an error, e.g. where a slit runs closer to another
+        boundary than ``maxh``; the message names a ``maxh`` that works), or if a face of the
+        shape got no elements.
     """
+    check_mesh_size(shape, maxh)
     ngmesh = OCCGeometry(shape, dim=2).GenerateMesh(maxh=maxh)
+    hole = unmeshed_edges(ngmesh)
+    if len(hole):
+        raise SceneError(_meshing_failure(shape, maxh, ngmesh.Coordinates()[hole[0]].mean(axis=0)))
     split_slit_mouths(ngmesh)
     mesh = ngsolve.Mesh(ngmesh)
     missing = sorted({face.name for face in shape.faces} - set(mesh.GetMaterials()))
@@ -87,6 +108,72 @@ def generate_mesh(shape, maxh: float) -> ngsolve.Mesh:
             "outline does not cross itself"
         )
     return mesh
+
+
+def check_mesh_size(shape, maxh: float) -> None:
+    """Raise :class:`~ngat.state.SceneError` if ``maxh`` asks for too many triangles.
+
+    The count is estimated as the shape's area over that of an equilateral triangle of side
+    ``maxh``; the limit is :data:`MAX_ELEMENTS`.
+    """
+    area = float(sum(face.mass for face in shape.faces))
+    triangle = math.sqrt(3) / 4
+    smallest = math.sqrt(area / triangle / MAX_ELEMENTS)
+    if maxh < smallest:
+        raise SceneError(
+            f"maxh={maxh:g} is too small for the geometry (area {area:.3g}): it would take "
+            f"more than {MAX_ELEMENTS:.0e} triangles; choose maxh >= {smallest:.2g} (the "
+            "initial mesh should be coarse, adaptivity refines where the crack is)"
+        )
+
+
+def unmeshed_edges(ngmesh: ngm.Mesh) -> np.ndarray:
+    """Return the element edges that border a part of the domain Netgen left without elements.
+
+    In a complete mesh an edge of exactly one element is a boundary segment (a slit's two
+    faces have distinct segments); any other such edge borders a hole in the mesh.
+
+    Returns
+    -------
+    np.ndarray
+        (m, 2) 0-based point numbers; empty for a complete mesh.
+    """
+    elements = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+    segments = np.sort(ngmesh.Elements1D().NumPy()["nodes"][:, :2].astype(np.int64) - 1, axis=1)
+    edges = np.sort(elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    single = unique[counts == 1]
+    width = len(ngmesh.Points())
+    on_boundary = np.isin(single @ [width, 1], segments @ [width, 1])
+    return single[~on_boundary]
+
+
+def _slits(shape) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """Return the slit segments of a shape: the edges that occur twice (out and back)."""
+    ends = [tuple(sorted(((e.start.x, e.start.y), (e.end.x, e.end.y)))) for e in shape.edges]
+    return sorted({end for end in ends if ends.count(end) > 1})
+
+
+def _meshing_failure(shape, maxh: float, hole: np.ndarray) -> str:
+    """Return the message for a mesh with a hole at ``hole``: where, and a ``maxh`` that works."""
+    where = f"({hole[0]:.3g}, {hole[1]:.3g})"
+    slits = _slits(shape)
+    if slits:
+        a, b = min(
+            slits, key=lambda s: np.linalg.norm(np.subtract(s[0], hole) + np.subtract(s[1], hole))
+        )
+        where += f", next to the slit ({a[0]:g}, {a[1]:g})–({b[0]:g}, {b[1]:g})"
+    problem = f"Netgen left part of the domain unmeshed at maxh={maxh:g} (at {where})"
+    h = maxh
+    for _ in range(6):
+        h /= 2
+        try:
+            check_mesh_size(shape, h)
+        except SceneError:
+            break
+        if not len(unmeshed_edges(OCCGeometry(shape, dim=2).GenerateMesh(maxh=h))):
+            return f"{problem}: maxh={h:g} meshes it"
+    return f"{problem}: no maxh down to {h:g} meshes it; check the geometry there"
 
 
 def _fan_components(elements: np.ndarray, around: np.ndarray, cut: set) -> list[list[int]]:

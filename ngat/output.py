@@ -26,12 +26,17 @@ __all__ = [
     "times_summary",
     "REQUIRED_COLUMNS",
     "OutputError",
+    "CHECKPOINT",
 ]
 
 REQUIRED_COLUMNS = [
     "step", "t", "bulk", "surface", "total", "force", "am_iterations", "elements", "vertices",
     "h_min", "h_max", "v_min", "v_max", "wall_s",
 ]  # fmt: skip
+
+
+CHECKPOINT = "checkpoint.npz"
+"""The checkpoint's file name in a results folder (:mod:`ngat.checkpoint`)."""
 
 
 class OutputError(OSError):
@@ -44,8 +49,8 @@ def read_summary(folder: Path) -> dict[str, Any] | None:
     Returns
     -------
     dict or None
-        The summary; ``{}`` if the folder holds rows of a run (``energies.csv``) but no readable
-        summary; ``None`` if it holds no run.
+        The summary; ``{}`` if the folder holds rows of a run (``energies.csv``) or its
+        checkpoint but no readable summary; ``None`` if it holds no run.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -53,7 +58,7 @@ def read_summary(folder: Path) -> dict[str, Any] | None:
     try:
         return json.loads((folder / "summary.json").read_text())
     except FileNotFoundError:
-        return {} if (folder / "energies.csv").exists() else None
+        return {} if (folder / "energies.csv").exists() or (folder / CHECKPOINT).exists() else None
     except (OSError, ValueError):
         return {}
 
@@ -80,7 +85,8 @@ def check_results_folder(
     ``mode="new"``: the folder must hold no run (a fresh run would replace its files), or only
     one that failed before its first step;
     ``"overwrite"``: anything goes; ``"resume"``: the folder must hold a run of the same scene
-    with the same parameters and load times.
+    with the same parameters and load times (or, without a readable summary, a checkpoint, whose
+    identity :func:`ngat.checkpoint.prepare_resume` checks).
 
     Parameters
     ----------
@@ -125,6 +131,8 @@ def check_results_folder(
                 "--out, pass --overwrite to replace it or --resume to continue it"
             )
         return summary
+    if (not summary or "scene" not in summary) and (Path(folder) / CHECKPOINT).exists():
+        return summary or {}  # the checkpoint names the run (checked by prepare_resume)
     if not summary or "scene" not in summary:
         raise OutputError(
             f"cannot resume '{folder}': it holds no run with a summary.json; start the run "
@@ -196,7 +204,7 @@ class ResultsWriter:
                 ]
         elif self.csv_path.exists():
             self.csv_path.unlink()
-        self.log_handler = logging.FileHandler(self.folder / "run.log")
+        self.log_handler = logging.FileHandler(self.folder / "run.log", "a" if append else "w")
         self.log_handler.setFormatter(
             logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
         )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -240,6 +241,12 @@ class AdaptivityParameters:
         paper's smallest element, 1e−3 at its ε = 0.05.
     max_refinements
         Limit of refinements per load step.
+    resolve_eps
+        Refuse, before the first step, a run whose refinement rule cannot make the elements where
+        the crack is narrower than ε (the criterion of ``eps-under-resolved``,
+        :mod:`ngat.diagnostics`): a ``floor`` of ε/2 or more, a crack band of ``band_h`` ≥ 1 or,
+        with ``adapt="fixed"``, an initial mesh at least ε wide where the crack starts.
+        ``False`` runs such a mesh anyway (studies of under-resolution).
     """
 
     maxh: float = 0.25
@@ -251,11 +258,12 @@ class AdaptivityParameters:
     band_h: float = 0.25
     floor: float = 0.02
     max_refinements: int = 200
+    resolve_eps: bool = True
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
-        if not self.maxh > 0:
-            raise ParameterError(f"maxh must be positive, got maxh={self.maxh}")
+        if not 0 < self.maxh < math.inf:
+            raise ParameterError(f"maxh must be a positive number, got maxh={self.maxh}")
         if self.adapt not in ADAPT_VARIANTS:
             raise ParameterError(
                 f"adapt must be one of {', '.join(ADAPT_VARIANTS)}, got adapt={self.adapt}"
@@ -270,6 +278,8 @@ class AdaptivityParameters:
             raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
         if not self.floor >= 0:
             raise ParameterError(f"floor must be non-negative, got floor={self.floor}")
+        if self.resolve_eps:
+            self.check_resolution()
         if not self.band_h > 2 * self.floor:
             raise ParameterError(
                 f"band_h must exceed twice the floor, got band_h={self.band_h}, "
@@ -278,6 +288,25 @@ class AdaptivityParameters:
         if not self.max_refinements >= 0:
             raise ParameterError(
                 f"max_refinements must be >= 0, got max_refinements={self.max_refinements}"
+            )
+
+    def check_resolution(self) -> None:
+        """Raise :class:`ParameterError` if the refinement rule can never resolve ε.
+
+        Elements are bisected only while wider than 2·floor·ε, and the crack band stops at
+        band_h·ε; ε is resolved once the elements at the crack are narrower than ε. The initial
+        mesh of ``adapt="fixed"`` is checked on the mesh, by the driver.
+        """
+        fix = "or set resolve_eps=false to run under-resolved on purpose"
+        if self.adapt != "fixed" and not 2 * self.floor < 1:
+            raise ParameterError(
+                f"floor={self.floor} stops bisection at elements {2 * self.floor:g}ε wide, so "
+                f"adapt={self.adapt} never resolves ε: set floor < 0.5 (default 0.02), {fix}"
+            )
+        if self.adapt == "band" and not self.band_h < 1:
+            raise ParameterError(
+                f"band_h={self.band_h} leaves the crack band's elements {self.band_h:g}ε wide, "
+                f"so the crack is never resolved: set band_h < 1 (default 0.25), {fix}"
             )
 
 

@@ -19,7 +19,7 @@ import ngsolve
 import numpy as np
 
 from ngat import geometries
-from ngat.geometry import generate_mesh
+from ngat.geometry import check_mesh_size, generate_mesh
 from ngat.parameters import Parameters
 from ngat.state import SceneError
 
@@ -98,12 +98,13 @@ class Scene:
             return self.mesh(maxh)
         return generate_mesh(self.geometry(), maxh)
 
-    def check(self) -> None:
+    def check(self, maxh: float | None = None) -> None:
         """Raise :class:`~ngat.state.SceneError` if a Dirichlet region is missing.
 
         That is: the scene has no Dirichlet region, or its geometry has no face or edge of a
-        Dirichlet region's name. Scenes with their own ``mesh`` builder are checked on the mesh, by
-        :class:`~ngat.state.ATState`.
+        Dirichlet region's name, or ``maxh`` (if given) asks for too many triangles
+        (:func:`~ngat.geometry.check_mesh_size`). Scenes with their own ``mesh`` builder are
+        checked on the mesh, by :class:`~ngat.state.ATState`.
         """
         if not self.loads:
             raise SceneError(
@@ -121,6 +122,8 @@ class Scene:
                 f"edges of the geometry (faces: {sorted(faces)}, edges: {sorted(edges)}); name "
                 "the OCC faces or edges accordingly"
             )
+        if maxh is not None:
+            check_mesh_size(shape, maxh)
 
     def configure(
         self, quick: bool = False, overrides: Mapping[str, Any] | None = None
@@ -152,8 +155,9 @@ class Scene:
         changes.update(overrides or {})
         times = np.asarray(times, dtype=float)
         check_times(self.name, times)
-        self.check()
-        return Parameters().replace(**changes), times
+        parameters = Parameters().replace(**changes)
+        self.check(parameters.adaptivity.maxh)
+        return parameters, times
 
 
 def check_times(name: str, times: np.ndarray) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
 __all__ = ["PhaseTimer"]
@@ -20,10 +20,18 @@ class PhaseTimer:
     ...     pass
     >>> sorted(timer.totals)
     ['solve']
+
+    Parameters
+    ----------
+    previous
+        The :meth:`summary` of an earlier part of the same run (a resumed run counts on from it).
     """
 
-    def __init__(self) -> None:
-        self.totals: dict[str, float] = defaultdict(float)
+    def __init__(self, previous: Mapping[str, float] | None = None) -> None:
+        earlier = dict(previous or {})
+        self.offset = earlier.pop("wall", 0.0)
+        earlier.pop("other", None)
+        self.totals: dict[str, float] = defaultdict(float, earlier)
         self.start = time.perf_counter()
 
     @contextmanager
@@ -36,8 +44,8 @@ class PhaseTimer:
             self.totals[phase] += time.perf_counter() - begin
 
     def elapsed(self) -> float:
-        """Seconds since the timer was created."""
-        return time.perf_counter() - self.start
+        """Seconds since the timer was created, plus those of the earlier part."""
+        return self.offset + time.perf_counter() - self.start
 
     def summary(self) -> dict[str, float]:
         """Return the totals per phase, ``other`` (the rest) and ``wall``."""

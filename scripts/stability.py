@@ -50,7 +50,8 @@ CASES = {
     "Δt=0.1": ({}, np.round(np.arange(0.0, 1.61, 0.1), 10)),
     "η=1e-3": ({"eta": 1e-3}, QUICK_TIMES),
     "η=1e-8": ({"eta": 1e-8}, QUICK_TIMES),
-    "ε under-resolved (fixed h=0.25)": ({"adapt": "fixed", "maxh": 0.25}, QUICK_TIMES),
+    "ε under-resolved (fixed h=0.25)":
+        ({"adapt": "fixed", "maxh": 0.25, "resolve_eps": False}, QUICK_TIMES),
     "TOL=1.0": ({"tol": 1.0}, LONG_TIMES),
     "TOL=0.15": ({"tol": 0.15}, QUICK_TIMES),
     "TOL=0.05": ({"tol": 0.05}, QUICK_TIMES),

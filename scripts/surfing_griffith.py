@@ -55,8 +55,14 @@ def band_size(records: list[dict]) -> float:
 
 
 def adaptive_overrides(eps: float, h: float | None, overrides: dict) -> dict:
-    """Return the run's parameters: with ``h=None`` the adaptive defaults from maxh = 10ε."""
-    return overrides if h is not None else {"maxh": MAXH_OVER_EPS * eps, **overrides}
+    """Return the run's parameters: with ``h=None`` the adaptive defaults from maxh = 10ε.
+
+    A fixed band of h ≥ ε is studied on purpose (its toughness G_eff(h)), so the check that
+    refuses meshes that cannot resolve ε is off for it.
+    """
+    if h is not None:
+        return {"resolve_eps": False, **overrides}
+    return {"maxh": MAXH_OVER_EPS * eps, **overrides}
 
 
 def critical_amplitude(

@@ -43,6 +43,7 @@ def test_v_out_of_bounds_without_lumping(tmp_path):
     # mass overshoots by 30 % at the side walls (tests/test_lumping.py) and is detected.
     scene = load_scene("profile-1d")
     changes = {"adapt": "fixed", "maxh": 0.1, "eps": 0.01, "bounded_v": False, "nonlinear": "am"}
+    changes["resolve_eps"] = False  # h = 10 ε on purpose
     for lumping in (True, False):
         parameters, times = scene.configure(overrides={**changes, "lumping": lumping})
         result = run(scene, parameters, times, tmp_path / str(lumping))
@@ -63,7 +64,7 @@ def test_v_out_of_bounds_without_lumping(tmp_path):
 
 def coarse_two_slits(**overrides):
     scene = load_scene("two-slits")
-    changes = {"adapt": "fixed", "maxh": 0.5, **overrides}
+    changes = {"adapt": "fixed", "maxh": 0.5, "resolve_eps": False, **overrides}
     parameters, _ = scene.configure(overrides=changes)
     return scene, parameters, np.array([0.0, 1.5])
 
@@ -88,7 +89,9 @@ def test_eps_under_resolved_before_any_crack(tmp_path):
     # Elements 5ε wide: the body never cracks (min v stays near 0.7, {v < 0.1} is empty), and
     # the too coarse mesh at the most damaged point must still be named.
     scene = load_scene("two-slits")
-    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.25})
+    parameters, _ = scene.configure(
+        overrides={"adapt": "fixed", "maxh": 0.25, "resolve_eps": False}
+    )
     result = run(scene, parameters, np.array([0.0, 1.0, 1.6]), tmp_path / "run")
     assert 0.1 < result.records[-1]["v_min"] < 0.9
     assert problems(tmp_path / "run") == {"eps-under-resolved"}

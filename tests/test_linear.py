@@ -40,7 +40,12 @@ def _runs(tmp_path_factory, overrides, times):
 @pytest.fixture(scope="module")
 def bounded(tmp_path_factory):
     """Fixed mesh, pointwise irreversibility: the v-step's active set runs at t = 1.4."""
-    overrides = {"adapt": "fixed", "maxh": 0.2, "irreversibility": "pointwise"}
+    overrides = {
+        "adapt": "fixed",
+        "maxh": 0.2,
+        "irreversibility": "pointwise",
+        "resolve_eps": False,
+    }
     return _runs(tmp_path_factory, overrides, np.array([0.0, 1.3, 1.4]))
 
 

@@ -88,7 +88,7 @@ def test_refinement_variants_after_and_fixed(tmp_path):
     records = {}
     for adapt in ("after", "fixed", "paper"):
         parameters, _ = scene.configure(
-            overrides={"adapt": adapt, "maxh": 0.5, "floor": 0.1, "tol": 0.5}
+            overrides={"adapt": adapt, "maxh": 0.5, "floor": 0.1, "tol": 0.5, "resolve_eps": False}
         )
         result = run(scene, parameters, np.array([0.0, 0.6, 1.0]), tmp_path / adapt)
         records[adapt] = result.records[-1]

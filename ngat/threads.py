@@ -1,0 +1,66 @@
+"""Thread pools fixed by ngat, so that a run's results do not depend on its environment.
+
+Floating-point addition is not associative, so a computation split over threads sums in an order
+that depends on the thread count — and, for NGSolve's TaskManager, on the scheduling. Two pools
+take part in a run: NGSolve's own threads (the sparse Cholesky factorisation) and OpenBLAS, which
+NGSolve, numpy and scipy each load. OpenBLAS starts with one thread per core unless
+``OPENBLAS_NUM_THREADS`` or ``OMP_NUM_THREADS`` say otherwise, and a Dask worker sets them to 1,
+so the same run gave different element counts from load step 25 on under ``ngat run`` and
+``ngat sweep``. :class:`FixedThreads` therefore sets both pools to counts ngat chooses, for the
+duration of a run (threadpoolctl for the BLAS and OpenMP libraries loaded in the process), and
+reports them for ``summary.json``. One thread each is also the fastest on two cores
+(``README.md``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import ngsolve
+from threadpoolctl import threadpool_info, threadpool_limits
+
+__all__ = ["FixedThreads", "NGSOLVE_THREADS", "BLAS_THREADS"]
+
+NGSOLVE_THREADS = 1
+"""NGSolve's threads: with more, the sparse Cholesky factorisation sums in an order that
+varies from run to run."""
+BLAS_THREADS = 1
+"""Threads of every BLAS and OpenMP library loaded (OpenBLAS of NGSolve, numpy and scipy)."""
+
+
+class FixedThreads:
+    """Set NGSolve's and the BLAS libraries' thread counts until :meth:`restore`.
+
+    Examples
+    --------
+    >>> threads = FixedThreads()
+    >>> threads.summary()["blas"]
+    1
+    >>> threads.restore()
+    """
+
+    def __init__(self) -> None:
+        self._ngsolve = ngsolve.GetNumThreads()
+        ngsolve.SetNumThreads(NGSOLVE_THREADS)
+        self._limits = threadpool_limits(limits=BLAS_THREADS)
+
+    def summary(self) -> dict[str, Any]:
+        """Return the thread counts in force, per pool and per library loaded."""
+        return {
+            "ngsolve": ngsolve.GetNumThreads(),
+            "blas": BLAS_THREADS,
+            "libraries": [
+                {
+                    "library": pool["prefix"],
+                    "api": pool["internal_api"],
+                    "version": pool["version"],
+                    "threads": pool["num_threads"],
+                }
+                for pool in threadpool_info()
+            ],
+        }
+
+    def restore(self) -> None:
+        """Give every pool back the thread count it had before."""
+        self._limits.restore_original_limits()
+        ngsolve.SetNumThreads(self._ngsolve)

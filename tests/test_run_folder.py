@@ -1,0 +1,66 @@
+"""The results folder across restarts: a fresh run.log with --overwrite, the wall time of a
+resumed run, and a resume that works after summary.json was deleted."""
+
+import json
+import textwrap
+import time
+
+import pytest
+
+from ngat.cli import main
+from ngat.driver import run
+from ngat.scene import load_scene
+
+# profile-1d with four load times: a few cheap steps to interrupt and resume.
+SCENE = """
+    import dataclasses
+    from geometries.profile_1d import scene as base
+    scene = dataclasses.replace(base, name="profile-steps", times=[0.0, 0.1, 0.2, 0.3])
+    """
+PAUSE = 0.5
+
+
+class Stop(Exception):
+    pass
+
+
+def test_overwrite_starts_a_fresh_run_log(tmp_path):
+    folder = tmp_path / "run"
+    args = ["run", "profile-1d", "--quick", "--quiet", "--out", str(folder)]
+    assert main(args) == 0
+    assert main([*args, "--overwrite"]) == 0
+    assert (folder / "run.log").read_text().count("scene profile-1d:") == 1
+
+
+def test_resume_without_summary_counts_the_whole_wall_time(tmp_path, capsys):
+    scene_file = tmp_path / "steps.py"
+    scene_file.write_text(textwrap.dedent(SCENE))
+    scene = load_scene(str(scene_file))
+    parameters, times = scene.configure()
+    folder = tmp_path / "run"
+
+    def pause_then_stop(record):
+        # The pauses before step 2's checkpoint count; the run stops after step 2.
+        time.sleep(PAUSE)
+        if record["step"] == 2:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run(scene, parameters, times, folder, on_step=pause_then_stop)
+    (folder / "summary.json").unlink()
+
+    args = ["run", str(scene_file), "--quiet", "--no-plots"]
+    assert main([*args, "--out", str(folder)]) == 2
+    assert "--resume to continue it" in capsys.readouterr().err
+    begin = time.perf_counter()
+    assert main([*args, "--resume", str(folder)]) == 0
+    resumed_part = time.perf_counter() - begin
+
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert summary["steps"] == 4 and summary["resumed_after_step"] == [2]
+    wall = summary["timing"]["wall"]
+    assert wall >= 2 * PAUSE
+    assert wall > resumed_part
+    phases = sum(v for k, v in summary["timing"].items() if k != "wall")
+    assert phases == pytest.approx(wall, abs=1e-3)

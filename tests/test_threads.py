@@ -1,0 +1,69 @@
+"""Results that repeat whatever the environment: ngat fixes its thread pools.
+
+``ngat run`` in an environment that asks OpenBLAS and OpenMP for two threads and the same run
+inside ``ngat sweep`` (whose Dask worker sets them to 1) write the same ``energies.csv``. Without
+the fixed pools the quick two-slits run differs from the first step on (in the last bits of the
+energies) and by 1e-3 in the final energy.
+"""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+from ngat.threads import FixedThreads
+
+SCENE = """
+    import dataclasses
+
+    from geometries.two_slits import scene as base
+
+    scene = dataclasses.replace(
+        base, name="two-slits-start", quick={**base.quick, "times": [0.0, 0.05]}
+    )
+    """
+
+
+def ngat(*args, env=None):
+    result = subprocess.run(
+        [sys.executable, "-m", "ngat.cli", *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **(env or {})},
+    )
+    assert result.returncode == 0, result.stderr
+    return result
+
+
+def rows_without_timing(folder):
+    with open(folder / "energies.csv", newline="") as f:
+        return [{k: v for k, v in row.items() if k != "wall_s"} for row in csv.DictReader(f)]
+
+
+def test_run_and_one_run_sweep_give_identical_energies(tmp_path):
+    scene = tmp_path / "start.py"
+    scene.write_text(textwrap.dedent(SCENE))
+    threads = {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2"}
+    ngat("run", str(scene), "--quick", "--quiet", "--out", str(tmp_path / "run"), env=threads)
+    sweep = ["sweep", str(scene), "--quick", "--quiet", "--grid", "eps=0.05", "--workers", "1"]
+    ngat(*sweep, "--out", str(tmp_path / "sweep"))
+    alone = rows_without_timing(tmp_path / "run")
+    swept = rows_without_timing(tmp_path / "sweep" / "eps=0.05")
+    assert len(alone) == 2
+    assert alone == swept
+    for folder in (tmp_path / "run", tmp_path / "sweep" / "eps=0.05"):
+        recorded = json.loads((folder / "summary.json").read_text())["threads"]
+        assert recorded["ngsolve"] == 1 and recorded["blas"] == 1
+        assert recorded["libraries"] and all(lib["threads"] == 1 for lib in recorded["libraries"])
+
+
+def test_fixed_threads_are_restored():
+    from threadpoolctl import threadpool_info
+
+    before = [pool["num_threads"] for pool in threadpool_info()]
+    threads = FixedThreads()
+    assert all(lib["threads"] == 1 for lib in threads.summary()["libraries"])
+    threads.restore()
+    assert [pool["num_threads"] for pool in threadpool_info()] == before
