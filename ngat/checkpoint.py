@@ -22,7 +22,6 @@ import csv
 import io
 import json
 import logging
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +30,13 @@ from typing import Any
 import ngsolve
 import numpy as np
 
-from ngat.output import OutputError, check_results_folder, times_summary, write_atomic
+from ngat.output import (
+    OutputError,
+    atomic_file,
+    check_results_folder,
+    times_summary,
+    write_atomic,
+)
 from ngat.state import ATState
 
 __all__ = [
@@ -100,7 +105,7 @@ def save_checkpoint(
     records: Sequence[dict[str, Any]],
     summary: dict[str, Any],
 ) -> None:
-    """Write ``folder/checkpoint.npz`` atomically (temporary file, fsync, rename).
+    """Write ``folder/checkpoint.npz`` atomically (:func:`ngat.output.atomic_file`).
 
     Parameters
     ----------
@@ -133,13 +138,8 @@ def save_checkpoint(
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
         **{f"solver_{key}": value for key, value in state.solver_state().items()},
     }
-    path = Path(folder) / CHECKPOINT
-    tmp = path.with_name(f".{CHECKPOINT}.tmp")
-    with open(tmp, "wb") as f:
+    with atomic_file(Path(folder) / CHECKPOINT) as f:
         np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def load_checkpoint(folder: Path) -> Checkpoint | None:

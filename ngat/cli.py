@@ -1,8 +1,9 @@
 """Command line: ``ngat run SCENE``, ``ngat scenes``.
 
-Errors in the input (unknown scene, bad parameter, unwritable folder, a scene without Dirichlet
-region) print one line naming the problem and exit with status 2; any other exception is a bug
-in ngat: its traceback and a request for a bug report, exit status 1. ``--debug`` raises both.
+Errors in the input (unknown scene, bad parameter, unwritable folder, a folder in use by another
+run, a scene without Dirichlet region) print one line naming the problem and exit with status 2;
+any other exception is a bug in ngat: its traceback and a request for a bug report, exit status 1.
+``--debug`` raises both.
 ``ngat run`` never replaces a run already in its results folder unless told:
 ``--overwrite`` starts afresh, ``--resume`` continues it.
 """
@@ -15,17 +16,19 @@ import sys
 import traceback
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ngat.checkpoint import finished_steps
 from ngat.diagnostics import ProblemError
-from ngat.driver import run
+from ngat.driver import RunResult, run
+from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError
 from ngat.output import OutputError, check_results_folder
-from ngat.parameters import ParameterError
-from ngat.scene import SceneNotFound, SceneTimesError, load_scene, scene_names
+from ngat.parameters import ParameterError, Parameters
+from ngat.scene import Scene, SceneNotFound, SceneTimesError, load_scene, scene_names
 from ngat.state import SceneError
 
 __all__ = ["main"]
@@ -70,12 +73,37 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
     folder = Path(
         args.resume or args.out or f"results/{scene.name}{'-quick' if args.quick else ''}"
     )
+    if args.resume and not folder.is_dir():
+        raise OutputError(
+            f"cannot resume '{folder}': it holds no run (there is no such folder); check the path"
+        )
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
-    existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
-    if args.resume and existing.get("status") == "completed":
-        if not args.quiet:
-            console.print(f"nothing to resume: the run in {folder} is complete")
-        return 0
+    # The lock covers the check too: two runs started together cannot both pass it.
+    with folder_lock(folder):
+        existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
+        if args.resume and existing.get("status") == "completed":
+            if not args.quiet:
+                console.print(f"nothing to resume: the run in {folder} is complete")
+            return 0
+        result = run_with_progress(scene, parameters, times, folder, args, console)
+    if not args.quiet:
+        final = result.summary["final"]
+        console.print(
+            f"{scene.name}: {result.summary['steps']} steps, total energy {final['total']:.6g}, "
+            f"{result.summary['timing']['wall']:.1f} s → {folder}"
+        )
+    return 0
+
+
+def run_with_progress(
+    scene: Scene,
+    parameters: Parameters,
+    times: np.ndarray,
+    folder: Path,
+    args: argparse.Namespace,
+    console: Console,
+) -> RunResult:
+    """Run (or resume) the scene with a progress bar; return the run's result."""
     done = finished_steps(folder) if args.resume else 0
     columns = [
         TextColumn("[bold]{task.description}"),
@@ -94,14 +122,7 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             )
             progress.update(task, advance=1, info=info)
 
-        result = run(scene, parameters, times, folder, on_step=on_step, resume=bool(args.resume))
-    if not args.quiet:
-        final = result.summary["final"]
-        console.print(
-            f"{scene.name}: {result.summary['steps']} steps, total energy {final['total']:.6g}, "
-            f"{result.summary['timing']['wall']:.1f} s → {folder}"
-        )
-    return 0
+        return run(scene, parameters, times, folder, on_step=on_step, resume=bool(args.resume))
 
 
 def command_sweep(args: argparse.Namespace, console: Console) -> int:

@@ -3,6 +3,7 @@
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
 forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
+A run holds its folder's lock throughout (:mod:`ngat.lock`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from ngat.checkpoint import (
 )
 from ngat.crack import connects, crack_tips
 from ngat.diagnostics import Diagnostics
+from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import ResultsWriter
 from ngat.parameters import Parameters
@@ -125,7 +127,26 @@ def run(
     -------
     RunResult
         Records, summary and the final state.
+
+    Raises
+    ------
+    FolderInUse
+        If another run holds the folder (:mod:`ngat.lock`).
     """
+    with folder_lock(folder):
+        return _run_locked(scene, parameters, times, Path(folder), on_step, monitor, resume)
+
+
+def _run_locked(
+    scene: Scene,
+    parameters: Parameters,
+    times: np.ndarray,
+    folder: Path,
+    on_step: StepCallback | None,
+    monitor: HalfStepMonitor | None,
+    resume: bool,
+) -> RunResult:
+    """:func:`run`, with the folder locked."""
     # One NGSolve thread: with more, the sparse Cholesky factorisation adds in an order that
     # varies from run to run, so runs (and resumed runs) would not repeat bit for bit; on two
     # cores one thread was also faster (0.042 s against 0.075 s per half-step at 30k DOFs).

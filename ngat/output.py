@@ -7,19 +7,22 @@ step ends, the VTU of a step is complete before ``fields.pvd`` names it, and ``f
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import logging
 import os
-from collections.abc import Sequence
+import secrets
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 from xml.sax.saxutils import quoteattr
 
 import ngsolve
 
 __all__ = [
     "ResultsWriter",
+    "atomic_file",
     "write_atomic",
     "read_summary",
     "check_results_folder",
@@ -150,18 +153,44 @@ def check_results_folder(
     return summary
 
 
+TEMPORARY = ".*.*-*.tmp"
+"""Glob pattern of the temporary files of :func:`atomic_file`."""
+
+
+@contextlib.contextmanager
+def atomic_file(path: Path) -> Iterator[IO[bytes]]:
+    """Open a temporary file that replaces ``path`` atomically when the block ends.
+
+    The temporary file, ``.NAME.PID-RANDOM.tmp`` next to ``path``, has a name of its own for
+    every writer, so two writers never share one; it is fsynced before the rename, and removed
+    if the block or the write fails (an exception, a full disk, an interrupt), so that ``path``
+    keeps its old content and no partial file stays behind. (``tempfile`` would create it with
+    mode 0600 instead of the umask's.)
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "xb") as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and an atomic rename."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    with atomic_file(path) as f:
+        f.write(text.encode())
 
 
 class ResultsWriter:
     """Write one run's results folder step by step.
+
+    The run must hold the folder's lock (:func:`ngat.lock.folder_lock`): temporary files found
+    in the folder are then left over from a killed run, and are removed.
 
     Parameters
     ----------
@@ -179,6 +208,8 @@ class ResultsWriter:
             probe = self.folder / ".write-test"
             probe.write_text("")
             probe.unlink()
+            for stale in self.folder.glob(TEMPORARY):
+                stale.unlink()
         except OSError as error:
             raise OutputError(
                 f"results folder '{self.folder}' is not writable ({error.strerror}); "
