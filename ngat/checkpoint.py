@@ -36,6 +36,7 @@ from ngat.output import (
     check_results_folder,
     times_summary,
     write_atomic,
+    writing,
 )
 from ngat.state import ATState
 
@@ -119,6 +120,11 @@ def save_checkpoint(
         The records of steps 0, …, ``step``.
     summary
         The run's summary so far (its ``scene``, ``parameters`` and ``times`` identify the run).
+
+    Raises
+    ------
+    OutputError
+        If the write fails (:func:`ngat.output.writing`); the previous checkpoint is then kept.
     """
     meta = {
         "version": 1,
@@ -138,7 +144,7 @@ def save_checkpoint(
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
         **{f"solver_{key}": value for key, value in state.solver_state().items()},
     }
-    with atomic_file(Path(folder) / CHECKPOINT) as f:
+    with writing(folder), atomic_file(Path(folder) / CHECKPOINT) as f:
         np.savez(f, **arrays)
 
 
@@ -149,11 +155,13 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
     ------
     OutputError
         If the file cannot be read (it is only ever replaced whole, so this means it was
-        changed by something else).
+        truncated or damaged by something else).
     """
     path = Path(folder) / CHECKPOINT
     if not path.exists():
         return None
+    # A damaged file makes zipfile, numpy or json raise almost anything (BadZipFile on a bad
+    # CRC or a cut-off end, ValueError on a bad array header, KeyError on a renamed member).
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
@@ -174,21 +182,25 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
                 coords=data["coords"],
                 solvers=solvers,
             )
-    except (OSError, ValueError, KeyError) as error:
+    except Exception as error:
         raise OutputError(
-            f"checkpoint '{path}' is unreadable ({error}); start the run afresh with --overwrite"
+            f"checkpoint '{path}' is damaged ({type(error).__name__}: {error}), the run cannot "
+            f"continue from it: start it afresh with --out {folder} --overwrite"
         ) from None
 
 
 def finished_steps(folder: Path) -> int:
-    """Return the number of load steps the checkpoint of ``folder`` holds (0 without one)."""
+    """Return the number of load steps the checkpoint of ``folder`` holds.
+
+    0 without a checkpoint or with a damaged one (:func:`load_checkpoint` says so).
+    """
     path = Path(folder) / CHECKPOINT
     if not path.exists():
         return 0
     try:
         with np.load(path, allow_pickle=False) as data:
             return json.loads(str(data["meta"]))["step"] + 1
-    except (OSError, ValueError, KeyError):
+    except Exception:  # damaged: see load_checkpoint
         return 0
 
 

@@ -1,9 +1,11 @@
 """Command line: ``ngat run SCENE``, ``ngat scenes``.
 
-Errors in the input (unknown scene, bad parameter, unwritable folder, a folder in use by another
-run, a scene without Dirichlet region) print one line naming the problem and exit with status 2;
-any other exception is a bug in ngat: its traceback and a request for a bug report, exit status 1.
-``--debug`` raises both.
+Errors in the input (unknown scene, bad parameter, unwritable or full folder, a folder in use by
+another run, a damaged checkpoint, a scene without Dirichlet region or whose code raises) print
+one line naming the problem and exit with status 2; any other exception is a bug in ngat: its
+traceback and a request for a bug report, exit status 1. SIGINT (Ctrl-C) and SIGTERM stop a run
+with one line saying how to continue it and the shell's status for a signal, 128 + its number
+(130, 143), so that scripts tell an interrupted run from bad input. ``--debug`` raises all.
 ``ngat run`` never replaces a run already in its results folder unless told:
 ``--overwrite`` starts afresh, ``--resume`` continues it.
 """
@@ -12,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 import logging
+import shlex
+import signal
 import sys
 import traceback
 from pathlib import Path
@@ -46,6 +50,18 @@ BUG_REPORT = (
     "ngat: internal error (a bug in ngat, not in your input): please report it with the "
     "command and the traceback above"
 )
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like SIGINT's KeyboardInterrupt so that a run stops the same way."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+def _signal_of(interrupt: KeyboardInterrupt) -> signal.Signals:
+    return signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT
 
 
 def parse_settings(items: list[str]) -> dict[str, str]:
@@ -85,7 +101,22 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             if not args.quiet:
                 console.print(f"nothing to resume: the run in {folder} is complete")
             return 0
-        result = run_with_progress(scene, parameters, times, folder, args, console)
+        try:
+            result = run_with_progress(scene, parameters, times, folder, args, console)
+        except KeyboardInterrupt as interrupt:
+            if args.debug:
+                raise
+            command = ["ngat", "run", args.scene, *(["--quick"] if args.quick else [])]
+            command += [word for item in args.set for word in ("--set", item)]
+            console.print(
+                f"ngat: interrupted by {_signal_of(interrupt).name} after {finished_steps(folder)} "
+                f"of {len(times)} load steps; continue with "
+                f"{shlex.join([*command, '--resume', str(folder)])}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+            return 128 + _signal_of(interrupt)
     if not args.quiet:
         final = result.summary["final"]
         console.print(
@@ -273,8 +304,14 @@ def main(argv: list[str] | None = None) -> int:
     handler.addFilter(lambda record: record.name.startswith("ngat") or record.levelno >= 30)
     logging.getLogger().addHandler(handler)
     logging.getLogger("ngat").setLevel(logging.INFO)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return args.handler(args, console)
+    except KeyboardInterrupt as interrupt:
+        if args.debug:
+            raise
+        console.print(f"ngat: interrupted by {_signal_of(interrupt).name}")
+        return 128 + _signal_of(interrupt)
     except (*INPUT_ERRORS, ConvergenceError, ProblemError) as error:
         if args.debug:
             raise
@@ -287,6 +324,7 @@ def main(argv: list[str] | None = None) -> int:
         console.print(BUG_REPORT, markup=False, highlight=False, soft_wrap=True)
         return 1
     finally:
+        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
         logging.getLogger().removeHandler(handler)
 
 

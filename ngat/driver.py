@@ -3,7 +3,9 @@
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
 forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
-A run holds its folder's lock throughout (:mod:`ngat.lock`).
+A run holds its folder's lock throughout (:mod:`ngat.lock`), and however it ends its
+``summary.json`` records how: ``completed``, ``interrupted`` (KeyboardInterrupt: SIGINT, or
+SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too full even for that.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from ngat.crack import connects, crack_tips
 from ngat.diagnostics import Diagnostics
 from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
-from ngat.output import ResultsWriter
+from ngat.output import OutputError, ResultsWriter
 from ngat.parameters import Parameters
 from ngat.scene import Scene
 from ngat.state import ATState
@@ -170,10 +172,10 @@ def _run_locked(
     else:
         summary.update({**checkpoint.summary, "status": "running", "versions": versions()})
         summary.setdefault("resumed_after_step", []).append(checkpoint.step)
-    writer.write_summary(summary)
     diagnostics = Diagnostics(parameters.solver.on_problem)
     diagnostics.problems.extend(summary.get("diagnostics", []))
     try:
+        writer.write_summary(summary)
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
             if checkpoint is not None:
@@ -234,9 +236,10 @@ def _run_locked(
             record["wall_s"] = round(time.perf_counter() - begin, 4)
             with timer("output"):
                 writer.write_step(record, mesh, {"u": state.u, "v": state.v})
-            result.records.append(record)
             with timer("checkpoint"):
-                save_checkpoint(folder, state, k, result.records, summary)
+                save_checkpoint(folder, state, k, [*result.records, record], summary)
+            # A step counts as finished once its checkpoint is written (--resume goes on there).
+            result.records.append(record)
             log.info(
                 "step %d t=%.4g: %d iterations, total %.6g, %d elements",
                 k,
@@ -249,18 +252,33 @@ def _run_locked(
                 on_step(record)
             diagnostics.raise_if_error()
         summary["status"] = "completed"
+    except KeyboardInterrupt:
+        summary["status"] = "interrupted"
+        raise
     except BaseException as error:
         summary["status"] = f"failed: {type(error).__name__}: {error}"
         raise
     finally:
+        writer.close()
         summary["steps"] = len(result.records)
         summary["am_iterations"] = int(sum(r["am_iterations"] for r in result.records))
         if result.records:
             last = result.records[-1]
-            summary["final"] = {key: last[key] for key in ("t", "bulk", "surface", "total")}
+            summary["final"] = {key: last[key] for key in ("step", "t", "bulk", "surface", "total")}
             summary["final"].update(elements=last["elements"], h_min=last["h_min"])
         summary["timing"] = timer.summary()
         summary["diagnostics"] = diagnostics.summary()
-        writer.write_summary(summary)
-        writer.close()
+        try:
+            writer.write_summary(summary)
+        except OutputError:
+            if summary["status"] == "completed":
+                raise
+            # The run's own error, often the same full disk, is the one to report. The space
+            # the writer reserved holds the summary without the entries the checkpoint keeps
+            # too (--resume restores them).
+            kept = {"refinement_history", "diagnostics"}
+            try:
+                writer.write_summary({k: v for k, v in summary.items() if k not in kept})
+            except OutputError:
+                log.warning("summary.json could not record how the run ended")
     return result
