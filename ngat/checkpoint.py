@@ -284,7 +284,13 @@ def restore_state(state: ATState, checkpoint: Checkpoint) -> None:
 
 
 def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
-    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row)."""
+    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row).
+
+    Raises
+    ------
+    OutputError
+        If the write fails (:func:`ngat.output.writing`).
+    """
     path = Path(folder) / "energies.csv"
     if not records:
         path.unlink(missing_ok=True)
@@ -294,4 +300,5 @@ def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
     writer = csv.DictWriter(text, fieldnames=list(records[0]), extrasaction="ignore")
     writer.writeheader()
     writer.writerows(records)
-    write_atomic(path, text.getvalue())
+    with writing(folder):
+        write_atomic(path, text.getvalue())

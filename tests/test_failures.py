@@ -210,6 +210,18 @@ def test_a_full_disk_is_one_line_a_failed_status_and_resumable(
     assert summary["status"] == f"failed: OutputError: {message}"
     assert summary["steps"] == 2 and load_checkpoint(folder).step == 1
     assert hidden_files(folder) == []
+    # Resumed on a disk still full: the same line, before anything changed.
+    import ngat.checkpoint
+
+    def no_space(path, text):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(ngat.checkpoint, "write_atomic", no_space)
+    before = snapshot(folder)
+    assert main([*command, "--resume", str(folder)]) == 2
+    assert one_line(capsys) == f"ngat: error: {message}"
+    assert snapshot(folder) == before
+    monkeypatch.undo()
     assert main([*command, "--resume", str(folder)]) == 0
     assert read_rows(folder) == expected
 
