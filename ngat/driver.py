@@ -10,10 +10,13 @@ SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too ful
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import platform
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
@@ -85,6 +88,32 @@ def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
     if len(regions) >= 2:
         measures["connected"] = connects(state.arrays, state.v_values, regions[0], regions[1])
     return measures
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back until the block ends, then deliver the first one.
+
+    Around the writes of a load step: its row, fields and checkpoint are written whole or not
+    at all, and an interrupted run's summary and checkpoint agree on its last finished step.
+    Python handles signals in the main thread only; elsewhere (a sweep's worker) this does
+    nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {
+        number: signal.signal(number, lambda number, frame: held.append(number))
+        for number in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, signal.SIG_DFL if handler is None else handler)
+        if held:
+            signal.raise_signal(held[0])
 
 
 def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
@@ -234,12 +263,14 @@ def _run_locked(
             record["warnings"] = " ".join(problems)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
-            with timer("output"):
-                writer.write_step(record, mesh, {"u": state.u, "v": state.v})
-            with timer("checkpoint"):
-                save_checkpoint(folder, state, k, [*result.records, record], summary)
-            # A step counts as finished once its checkpoint is written (--resume goes on there).
-            result.records.append(record)
+            with signals_held():
+                with timer("output"):
+                    writer.write_step(record, mesh, {"u": state.u, "v": state.v})
+                with timer("checkpoint"):
+                    save_checkpoint(folder, state, k, [*result.records, record], summary)
+                # A step counts as finished once its checkpoint is written (--resume goes on
+                # there); the records of a failed write do not hold it.
+                result.records.append(record)
             log.info(
                 "step %d t=%.4g: %d iterations, total %.6g, %d elements",
                 k,
