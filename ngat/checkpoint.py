@@ -22,7 +22,6 @@ import csv
 import io
 import json
 import logging
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,9 +33,11 @@ import numpy as np
 from ngat.output import (
     CHECKPOINT,
     OutputError,
+    atomic_file,
     check_results_folder,
     times_summary,
     write_atomic,
+    writing,
 )
 from ngat.state import ATState
 
@@ -104,7 +105,7 @@ def save_checkpoint(
     records: Sequence[dict[str, Any]],
     summary: dict[str, Any],
 ) -> None:
-    """Write ``folder/checkpoint.npz`` atomically (temporary file, fsync, rename).
+    """Write ``folder/checkpoint.npz`` atomically (:func:`ngat.output.atomic_file`).
 
     Parameters
     ----------
@@ -118,6 +119,11 @@ def save_checkpoint(
         The records of steps 0, …, ``step``.
     summary
         The run's summary so far (its ``scene``, ``parameters`` and ``times`` identify the run).
+
+    Raises
+    ------
+    OutputError
+        If the write fails (:func:`ngat.output.writing`); the previous checkpoint is then kept.
     """
     meta = {
         "version": 1,
@@ -137,13 +143,8 @@ def save_checkpoint(
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
         **{f"solver_{key}": value for key, value in state.solver_state().items()},
     }
-    path = Path(folder) / CHECKPOINT
-    tmp = path.with_name(f".{CHECKPOINT}.tmp")
-    with open(tmp, "wb") as f:
+    with writing(folder), atomic_file(Path(folder) / CHECKPOINT) as f:
         np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def load_checkpoint(folder: Path) -> Checkpoint | None:
@@ -153,11 +154,13 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
     ------
     OutputError
         If the file cannot be read (it is only ever replaced whole, so this means it was
-        changed by something else).
+        truncated or damaged by something else).
     """
     path = Path(folder) / CHECKPOINT
     if not path.exists():
         return None
+    # A damaged file makes zipfile, numpy or json raise almost anything (BadZipFile on a bad
+    # CRC or a cut-off end, ValueError on a bad array header, KeyError on a renamed member).
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
@@ -178,21 +181,25 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
                 coords=data["coords"],
                 solvers=solvers,
             )
-    except (OSError, ValueError, KeyError) as error:
+    except Exception as error:
         raise OutputError(
-            f"checkpoint '{path}' is unreadable ({error}); start the run afresh with --overwrite"
+            f"checkpoint '{path}' is damaged ({type(error).__name__}: {error}), the run cannot "
+            f"continue from it: start it afresh with --out {folder} --overwrite"
         ) from None
 
 
 def finished_steps(folder: Path) -> int:
-    """Return the number of load steps the checkpoint of ``folder`` holds (0 without one)."""
+    """Return the number of load steps the checkpoint of ``folder`` holds.
+
+    0 without a checkpoint or with a damaged one (:func:`load_checkpoint` says so).
+    """
     path = Path(folder) / CHECKPOINT
     if not path.exists():
         return 0
     try:
         with np.load(path, allow_pickle=False) as data:
             return json.loads(str(data["meta"]))["step"] + 1
-    except (OSError, ValueError, KeyError):
+    except Exception:  # damaged: see load_checkpoint
         return 0
 
 
@@ -276,7 +283,13 @@ def restore_state(state: ATState, checkpoint: Checkpoint) -> None:
 
 
 def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
-    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row)."""
+    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row).
+
+    Raises
+    ------
+    OutputError
+        If the write fails (:func:`ngat.output.writing`).
+    """
     path = Path(folder) / "energies.csv"
     if not records:
         path.unlink(missing_ok=True)
@@ -286,4 +299,5 @@ def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
     writer = csv.DictWriter(text, fieldnames=list(records[0]), extrasaction="ignore")
     writer.writeheader()
     writer.writerows(records)
-    write_atomic(path, text.getvalue())
+    with writing(folder):
+        write_atomic(path, text.getvalue())

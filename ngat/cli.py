@@ -1,8 +1,11 @@
 """Command line: ``ngat run SCENE``, ``ngat scenes``, ``ngat plot DIR``, ``ngat sweep``.
 
-Errors in the input (unknown scene, bad parameter, unwritable folder, a scene without Dirichlet
-region) print one line naming the problem and exit with status 2; any other exception is a bug
-in ngat: its traceback and a request for a bug report, exit status 1. ``--debug`` raises both.
+Errors in the input (unknown scene, bad parameter, unwritable or full folder, a folder in use by
+another run, a damaged checkpoint, a scene without Dirichlet region or whose code raises) print
+one line naming the problem and exit with status 2; any other exception is a bug in ngat: its
+traceback and a request for a bug report, exit status 1. SIGINT (Ctrl-C) and SIGTERM stop a run
+with one line saying how to continue it and the shell's status for a signal, 128 + its number
+(130, 143), so that scripts tell an interrupted run from bad input. ``--debug`` raises all.
 ``ngat run`` never replaces a run already in its results folder unless told:
 ``--overwrite`` starts afresh, ``--resume`` continues it.
 """
@@ -11,20 +14,25 @@ from __future__ import annotations
 
 import argparse
 import logging
+import shlex
+import signal
 import sys
 import traceback
+from contextlib import ExitStack
 from pathlib import Path
 
 from rich.console import Console
 from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from ngat.checkpoint import finished_steps
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
-from ngat.experiment import pictures_on_exit, plan_run
+from ngat.experiment import RunPlan, pictures_on_exit, plan_run
 from ngat.minimization import ConvergenceError
 from ngat.output import OutputError
 from ngat.parameters import ParameterError
+from ngat.results import RunResult
 from ngat.scene import SceneNotFound, SceneTimesError, load_scene, scene_names
 from ngat.state import SceneError
 
@@ -43,6 +51,18 @@ BUG_REPORT = (
     "ngat: internal error (a bug in ngat, not in your input): please report it with the "
     "command and the traceback above"
 )
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like SIGINT's KeyboardInterrupt so that a run stops the same way."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+def _signal_of(interrupt: KeyboardInterrupt) -> signal.Signals:
+    return signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT
 
 
 def parse_settings(items: list[str]) -> dict[str, str]:
@@ -65,18 +85,48 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
     """Run one scene with a progress bar; draw its pictures when it ends, however it ends."""
     if args.resume and (args.out or args.overwrite):
         raise ParameterError("--resume DIR names the results folder: leave out --out, --overwrite")
-    plan = plan_run(
-        args.scene,
-        args.resume or args.out,
-        args.quick,
-        args.overwrite,
-        bool(args.resume),
-        parse_settings(args.set),
-    )
-    if plan.finished:
-        if not args.quiet:
-            console.print(f"nothing to resume: the run in {plan.folder} is complete")
-        return 0
+    # The folder's lock covers the check too: two runs started together cannot both pass it.
+    with ExitStack() as lock:
+        plan = plan_run(
+            args.scene,
+            args.resume or args.out,
+            args.quick,
+            args.overwrite,
+            bool(args.resume),
+            parse_settings(args.set),
+            lock=lock,
+        )
+        if plan.finished:
+            if not args.quiet:
+                console.print(f"nothing to resume: the run in {plan.folder} is complete")
+            return 0
+        try:
+            result = run_with_progress(plan, args, console)
+        except KeyboardInterrupt as interrupt:
+            if args.debug:
+                raise
+            command = ["ngat", "run", args.scene, *(["--quick"] if args.quick else [])]
+            command += [word for item in args.set for word in ("--set", item)]
+            console.print(
+                f"ngat: interrupted by {_signal_of(interrupt).name} after "
+                f"{finished_steps(plan.folder)} of {len(plan.times)} load steps; continue with "
+                f"{shlex.join([*command, '--resume', str(plan.folder)])}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+            return 128 + _signal_of(interrupt)
+    if not args.quiet:
+        final = result.summary["final"]
+        console.print(
+            f"{plan.scene.name}: {result.summary['steps']} steps, total energy "
+            f"{final['total']:.6g}, {result.summary['timing']['wall']:.1f} s → {plan.folder}"
+        )
+    return 0
+
+
+def run_with_progress(plan: RunPlan, args: argparse.Namespace, console: Console) -> RunResult:
+    """Run (or resume) the planned run with a progress bar, drawing its pictures at the end."""
     columns = [
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -99,16 +149,9 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             )
             progress.update(task, advance=1, info=info)
 
-        result = run(
+        return run(
             plan.scene, plan.parameters, plan.times, plan.folder, on_step, resume=plan.resume
         )
-    if not args.quiet:
-        final = result.summary["final"]
-        console.print(
-            f"{plan.scene.name}: {result.summary['steps']} steps, total energy "
-            f"{final['total']:.6g}, {result.summary['timing']['wall']:.1f} s → {plan.folder}"
-        )
-    return 0
 
 
 def command_sweep(args: argparse.Namespace, console: Console) -> int:
@@ -262,8 +305,14 @@ def main(argv: list[str] | None = None) -> int:
     handler.addFilter(lambda record: record.name.startswith("ngat") or record.levelno >= 30)
     logging.getLogger().addHandler(handler)
     logging.getLogger("ngat").setLevel(logging.INFO)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return args.handler(args, console)
+    except KeyboardInterrupt as interrupt:
+        if args.debug:
+            raise
+        console.print(f"ngat: interrupted by {_signal_of(interrupt).name}")
+        return 128 + _signal_of(interrupt)
     except (*INPUT_ERRORS, ConvergenceError, ProblemError) as error:
         if args.debug:
             raise
@@ -276,6 +325,7 @@ def main(argv: list[str] | None = None) -> int:
         console.print(BUG_REPORT, markup=False, highlight=False, soft_wrap=True)
         return 1
     finally:
+        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
         logging.getLogger().removeHandler(handler)
 
 

@@ -3,14 +3,20 @@
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
 forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
+A run holds its folder's lock throughout (:mod:`ngat.lock`), and however it ends its
+``summary.json`` records how: ``completed``, ``interrupted`` (KeyboardInterrupt: SIGINT, or
+SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too full even for that.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import platform
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -28,8 +34,9 @@ from ngat.checkpoint import (
 )
 from ngat.crack import check_slits, connects, crack_tips
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
+from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
-from ngat.output import ResultsWriter
+from ngat.output import OutputError, ResultsWriter
 from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
@@ -62,6 +69,32 @@ def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
     if len(regions) >= 2:
         measures["connected"] = connects(state.arrays, state.v_values, regions[0], regions[1])
     return measures
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back until the block ends, then deliver the first one.
+
+    Around the writes of a load step: its row, fields and checkpoint are written whole or not
+    at all, and an interrupted run's summary and checkpoint agree on its last finished step.
+    Python handles signals in the main thread only; elsewhere (a sweep's worker) this does
+    nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {
+        number: signal.signal(number, lambda number, frame: held.append(number))
+        for number in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, signal.SIG_DFL if handler is None else handler)
+        if held:
+            signal.raise_signal(held[0])
 
 
 def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
@@ -106,7 +139,26 @@ def run(
     -------
     RunResult
         Records, summary, the final state and the folder.
+
+    Raises
+    ------
+    FolderInUse
+        If another run holds the folder (:mod:`ngat.lock`).
     """
+    with folder_lock(folder):
+        return _run_locked(scene, parameters, times, Path(folder), on_step, monitor, resume)
+
+
+def _run_locked(
+    scene: Scene,
+    parameters: Parameters,
+    times: np.ndarray,
+    folder: Path,
+    on_step: StepCallback | None,
+    monitor: HalfStepMonitor | None,
+    resume: bool,
+) -> RunResult:
+    """:func:`run`, with the folder locked."""
     checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
     timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
     writer = ResultsWriter(folder, append=checkpoint is not None)
@@ -126,12 +178,12 @@ def run(
     else:
         summary.update({**checkpoint.summary, "status": "running", "versions": versions()})
         summary.setdefault("resumed_after_step", []).append(checkpoint.step)
-    writer.write_summary(summary)
     diagnostics = Diagnostics(parameters.solver.on_problem)
     diagnostics.problems.extend(summary.get("diagnostics", []))
     threads = FixedThreads()
     try:
         summary["threads"] = threads.summary()
+        writer.write_summary(summary)
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
             if checkpoint is not None:
@@ -193,12 +245,15 @@ def run(
             record["warnings"] = " ".join(problems)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
-            with timer("output"):
-                writer.write_step(record, mesh, {"u": state.u, "v": state.v})
-            result.records.append(record)
-            summary["timing"] = timer.summary()
-            with timer("checkpoint"):
-                save_checkpoint(folder, state, k, result.records, summary)
+            with signals_held():
+                with timer("output"):
+                    writer.write_step(record, mesh, {"u": state.u, "v": state.v})
+                summary["timing"] = timer.summary()
+                with timer("checkpoint"):
+                    save_checkpoint(folder, state, k, [*result.records, record], summary)
+                # A step counts as finished once its checkpoint is written (--resume goes on
+                # there); the records of a failed write do not hold it.
+                result.records.append(record)
             log.info(
                 "step %d t=%.4g: %d iterations, total %.6g, %d elements",
                 k,
@@ -211,19 +266,34 @@ def run(
                 on_step(record)
             diagnostics.raise_if_error()
         summary["status"] = "completed"
+    except KeyboardInterrupt:
+        summary["status"] = "interrupted"
+        raise
     except BaseException as error:
         summary["status"] = f"failed: {type(error).__name__}: {error}"
         raise
     finally:
+        writer.close()
         summary["steps"] = len(result.records)
         summary["am_iterations"] = int(sum(r["am_iterations"] for r in result.records))
         if result.records:
             last = result.records[-1]
-            summary["final"] = {key: last[key] for key in ("t", "bulk", "surface", "total")}
+            summary["final"] = {key: last[key] for key in ("step", "t", "bulk", "surface", "total")}
             summary["final"].update(elements=last["elements"], h_min=last["h_min"])
         summary["timing"] = timer.summary()
         summary["diagnostics"] = diagnostics.summary()
         threads.restore()
-        writer.write_summary(summary)
-        writer.close()
+        try:
+            writer.write_summary(summary)
+        except OutputError:
+            if summary["status"] == "completed":
+                raise
+            # The run's own error, often the same full disk, is the one to report. The space
+            # the writer reserved holds the summary without the entries the checkpoint keeps
+            # too (--resume restores them).
+            kept = {"refinement_history", "diagnostics"}
+            try:
+                writer.write_summary({k: v for k, v in summary.items() if k not in kept})
+            except OutputError:
+                log.warning("summary.json could not record how the run ended")
     return result

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +23,8 @@ import numpy as np
 from ngat.checkpoint import finished_steps
 from ngat.driver import StepCallback
 from ngat.driver import run as run_history
-from ngat.output import check_results_folder
+from ngat.lock import folder_lock
+from ngat.output import OutputError, check_results_folder
 from ngat.parameters import ParameterError, Parameters
 from ngat.results import RunResult, load_results
 from ngat.scene import Scene, load_scene
@@ -71,6 +72,7 @@ def plan_run(
     overwrite: bool = False,
     resume: bool = False,
     changes: Mapping[str, Any] | None = None,
+    lock: ExitStack | None = None,
 ) -> RunPlan:
     """Find the scene, apply the parameter changes and check the results folder.
 
@@ -88,6 +90,10 @@ def plan_run(
         Continue the interrupted run in the folder.
     changes
         Parameter name → value, strings (``--set``) or values of the parameter's type.
+    lock
+        Enter the folder's lock (:func:`ngat.lock.folder_lock`) into this stack before the
+        folder is checked, so that the check and the run that follows are one step for other
+        processes; without it the folder is checked unlocked (the run takes the lock itself).
 
     Raises
     ------
@@ -100,6 +106,12 @@ def plan_run(
         scene = load_scene(str(scene))
     parameters, times = scene.configure(quick, changes)
     folder = Path(out or f"results/{scene.name}{'-quick' if quick else ''}")
+    if resume and not folder.is_dir():
+        raise OutputError(
+            f"cannot resume '{folder}': it holds no run (there is no such folder); check the path"
+        )
+    if lock is not None:
+        lock.enter_context(folder_lock(folder))
     mode = "resume" if resume else "overwrite" if overwrite else "new"
     existing = check_results_folder(folder, scene.name, parameters.flat(), times, mode)
     finished = resume and (existing or {}).get("status") == "completed"
@@ -138,12 +150,23 @@ def draw_pictures(folder: Path, slits: Sequence = ()) -> list[Path]:
     return written
 
 
+def _energies_stamp(folder: Path) -> tuple[int, int] | None:
+    """Return size and modification time of the folder's ``energies.csv`` (None: none)."""
+    try:
+        stat = (Path(folder) / "energies.csv").stat()
+    except OSError:
+        return None
+    return stat.st_size, stat.st_mtime_ns
+
+
 @contextmanager
 def pictures_on_exit(folder: Path, slits: Sequence = (), enabled: bool = True) -> Iterator[None]:
     """Draw the run's pictures (:func:`draw_pictures`) when the block ends, however it ends.
 
     A block that raises (a failed or interrupted run) still gets the pictures of what its
-    folder holds, and its own exception goes on: a failure to draw is then only logged.
+    folder holds, and its own exception goes on: a failure to draw is then only logged. A block
+    that raises before it wrote a load step (bad input found on the way in, e.g. a damaged
+    checkpoint) draws nothing: the folder stays as it was.
 
     Parameters
     ----------
@@ -154,14 +177,15 @@ def pictures_on_exit(folder: Path, slits: Sequence = (), enabled: bool = True) -
     enabled
         ``False``: draw nothing (``--no-plots``).
     """
+    before = _energies_stamp(folder)
     try:
         yield
     except BaseException:
-        if enabled:
+        if enabled and _energies_stamp(folder) != before:
             try:
                 draw_pictures(folder, slits)
             except Exception as error:  # the run's own error matters, not the pictures'
-                log.warning("pictures not drawn: %s: %s", type(error).__name__, error)
+                log.info("pictures not drawn: %s: %s", type(error).__name__, error)
         raise
     if enabled:
         draw_pictures(folder, slits)

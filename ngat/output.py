@@ -2,25 +2,33 @@
 
 Every file is usable while the run goes on and after a crash: each CSV row is flushed when its
 step ends, the VTU of a step is complete before ``fields.pvd`` names it, and ``fields.pvd`` and
-``summary.json`` are replaced atomically (write a temporary file, then rename).
+``summary.json`` are replaced atomically (write a temporary file, then rename). A write that
+fails (a full disk) leaves no partial file behind — no temporary file, no half VTU, no half CSV
+row — and raises :class:`OutputError` saying how to continue.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
 import json
 import logging
 import os
-from collections.abc import Sequence
+import secrets
+import sys
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 from xml.sax.saxutils import quoteattr
 
 import ngsolve
 
 __all__ = [
     "ResultsWriter",
+    "atomic_file",
     "write_atomic",
+    "writing",
     "read_summary",
     "check_results_folder",
     "times_summary",
@@ -158,18 +166,91 @@ def check_results_folder(
     return summary
 
 
+TEMPORARY = ".*.*-*.tmp"
+"""Glob pattern of the temporary files of :func:`atomic_file`."""
+
+VTU_END = b"</VTKFile>\n"
+"""The last bytes of a complete VTU file."""
+
+RESERVE = 64 * 1024
+"""Bytes a run holds in ``.ngat-reserve`` until it ends, so that on a full disk the final
+``summary.json`` still fits (at least without the entries the checkpoint keeps too)."""
+
+
+@contextlib.contextmanager
+def atomic_file(path: Path) -> Iterator[IO[bytes]]:
+    """Open a temporary file that replaces ``path`` atomically when the block ends.
+
+    The temporary file, ``.NAME.PID-RANDOM.tmp`` next to ``path``, has a name of its own for
+    every writer, so two writers never share one; it is fsynced before the rename, and removed
+    if the block or the write fails (an exception, a full disk, an interrupt), so that ``path``
+    keeps its old content and no partial file stays behind. (``tempfile`` would create it with
+    mode 0600 instead of the umask's.)
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "xb") as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and an atomic rename."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    with atomic_file(path) as f:
+        f.write(text.encode())
+
+
+@contextlib.contextmanager
+def writing(folder: Path) -> Iterator[None]:
+    """Turn a failed write into an :class:`OutputError` naming the folder and how to go on.
+
+    A run's writes fail for reasons outside ngat — a full disk, a quota, a folder removed or
+    made read-only meanwhile; the run can continue from its last checkpoint once that is fixed.
+    """
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as error:
+        raise OutputError(
+            f"cannot write to results folder '{folder}' ({error.strerror or error}): free space "
+            f"or fix the folder, then continue the run with --resume {folder}"
+        ) from error
+
+
+def _ends_with(path: Path, end: bytes) -> bool:
+    """Return whether the file ``path`` ends with the bytes ``end``."""
+    with open(path, "rb") as f:
+        size = f.seek(0, os.SEEK_END)
+        f.seek(max(0, size - len(end)))
+        return f.read() == end
+
+
+class _RunLog(logging.FileHandler):
+    """``run.log``: a line that cannot be written (a full disk) is dropped without a traceback.
+
+    The run's own writes report the full disk (:func:`writing`); logging's default would print
+    a traceback for every log line until then.
+    """
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        """Drop the record if writing it failed; report any other error as logging does."""
+        if not isinstance(sys.exc_info()[1], OSError):
+            super().handleError(record)
 
 
 class ResultsWriter:
     """Write one run's results folder step by step.
+
+    The run must hold the folder's lock (:func:`ngat.lock.folder_lock`): temporary files found
+    in the folder are then left over from a killed run, and are removed. Until :meth:`close`
+    the writer holds :data:`RESERVE` bytes of disk space for the final summary.
 
     Parameters
     ----------
@@ -187,6 +268,11 @@ class ResultsWriter:
             probe = self.folder / ".write-test"
             probe.write_text("")
             probe.unlink()
+            for stale in self.folder.glob(TEMPORARY):
+                stale.unlink()
+            self.reserve = self.folder / ".ngat-reserve"
+            # Random bytes: a compressing file system would store zeros in no space at all.
+            self.reserve.write_bytes(os.urandom(RESERVE))
         except OSError as error:
             raise OutputError(
                 f"results folder '{self.folder}' is not writable ({error.strerror}); "
@@ -204,7 +290,7 @@ class ResultsWriter:
                 ]
         elif self.csv_path.exists():
             self.csv_path.unlink()
-        self.log_handler = logging.FileHandler(self.folder / "run.log", "a" if append else "w")
+        self.log_handler = _RunLog(self.folder / "run.log", "a" if append else "w")
         self.log_handler.setFormatter(
             logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
         )
@@ -225,39 +311,78 @@ class ResultsWriter:
             Current mesh.
         fields
             Name → GridFunction written to the VTU (u and v).
+
+        Raises
+        ------
+        OutputError
+            If a write fails (see :func:`writing`); the step's VTU and row are then not kept.
         """
         name = f"fields/step_{int(record['step']):04d}"
-        ngsolve.VTKOutput(
-            ma=mesh,
-            coefs=list(fields.values()),
-            names=list(fields),
-            filename=str(self.folder / name),
-            subdivision=0,
-        ).Do()
-        self.pvd_entries.append((float(record["t"]), f"{name}.vtu"))
-        datasets = "\n".join(
-            f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
-            for t, f in self.pvd_entries
-        )
-        write_atomic(
-            self.folder / "fields.pvd",
-            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
-            f"  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n",
-        )
+        with writing(self.folder):
+            self._write_vtu(name, mesh, fields)
+            self.pvd_entries.append((float(record["t"]), f"{name}.vtu"))
+            datasets = "\n".join(
+                f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
+                for t, f in self.pvd_entries
+            )
+            write_atomic(
+                self.folder / "fields.pvd",
+                '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+                f"  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n",
+            )
+            self._append_row(record)
+
+    def _write_vtu(self, name: str, mesh: ngsolve.Mesh, fields: dict) -> None:
+        """Write ``name.vtu``; raise :class:`OSError` and remove it unless it is complete."""
+        path = self.folder / f"{name}.vtu"
+        try:
+            ngsolve.VTKOutput(
+                ma=mesh,
+                coefs=list(fields.values()),
+                names=list(fields),
+                filename=str(self.folder / name),
+                subdivision=0,
+            ).Do()
+            # NGSolve does not report a failed write (it truncates the file on a full disk).
+            if not _ends_with(path, VTU_END):
+                raise OSError(errno.EIO, f"{path.name} came out incomplete; is the disk full?")
+        except BaseException:
+            path.unlink(missing_ok=True)
+            raise
+
+    def _append_row(self, record: dict[str, Any]) -> None:
+        """Append the row of ``record`` to ``energies.csv``, or leave the file as it was."""
         new_file = self.columns is None
         if new_file:
             self.columns = list(record)
-        with open(self.csv_path, "a", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
-            if new_file:
-                writer.writeheader()
-            writer.writerow(record)
+        size = self.csv_path.stat().st_size if self.csv_path.exists() else 0
+        try:
+            with open(self.csv_path, "a", newline="") as f:
+                writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
+                if new_file:
+                    writer.writeheader()
+                writer.writerow(record)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                if size:
+                    os.truncate(self.csv_path, size)
+                else:
+                    self.csv_path.unlink()
+            raise
 
     def write_summary(self, summary: dict[str, Any]) -> None:
-        """Replace ``summary.json`` atomically."""
-        write_atomic(self.folder / "summary.json", json.dumps(summary, indent=2, default=str))
+        """Replace ``summary.json`` atomically.
+
+        Raises
+        ------
+        OutputError
+            If the write fails (see :func:`writing`); the old summary is then kept.
+        """
+        with writing(self.folder):
+            write_atomic(self.folder / "summary.json", json.dumps(summary, indent=2, default=str))
 
     def close(self) -> None:
-        """Detach the log file."""
+        """Detach the log file and free the reserved space (before the final summary)."""
         logging.getLogger("ngat").removeHandler(self.log_handler)
         self.log_handler.close()
+        self.reserve.unlink(missing_ok=True)

@@ -366,6 +366,12 @@ class Parameters:
 
     def check(self) -> None:
         """Check every group; raise :class:`ParameterError` naming the first invalid value."""
+        for name, value in self.flat().items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ParameterError(
+                    f"{name} must be a finite number, got {name}={value}: give e.g. "
+                    f"{name}={Parameters().flat()[name]}"
+                )
         for group in self._groups().values():
             group.check()
         if self.model.model != "antiplane" and "newton" in self.solver.nonlinear:

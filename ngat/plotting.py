@@ -140,11 +140,19 @@ def plot_results(
     Raises
     ------
     PlotError
-        If the folder holds neither energies nor fields, or ``renderer`` is unknown.
+        If ``folder`` is not a folder, holds neither energies nor fields, or ``renderer`` is
+        unknown.
     """
     if renderer not in ("auto", "pyvista", "matplotlib"):
         raise PlotError(f"renderer must be 'auto', 'pyvista' or 'matplotlib', got '{renderer}'")
     folder = Path(folder)
+    if not folder.exists():
+        raise PlotError(f"'{folder}' does not exist: give the results folder of a run")
+    if not folder.is_dir():
+        raise PlotError(
+            f"'{folder}' is a file, not a folder: give the results folder of a run (the folder "
+            "that holds energies.csv)"
+        )
     written = []
     energies = None
     if (folder / "energies.csv").exists():
@@ -153,7 +161,7 @@ def plot_results(
             written.append(plot_energies(energies, folder / "energies.png"))
         else:
             log.info("%s: energies.csv has no complete row", folder)
-    frames = field_series(folder, energies) if folder.is_dir() else []
+    frames = field_series(folder, energies)
     if not written and not frames:
         raise PlotError(f"'{folder}' holds no energies.csv rows and no fields to plot")
     for old in folder.glob("v_t*.png"):

@@ -3,12 +3,17 @@
 A scene is one Python file that defines ``scene = Scene(...)``. The package's scenes are the
 subpackage :mod:`ngat.geometries` (the repository's ``geometries`` folder) and are found by name
 (``two-slits`` → ``geometries/two_slits.py``); any other file is found by its path. A scene
-states only what differs from the defaults.
+states only what differs from the defaults. The functions of a scene loaded by
+:func:`load_scene` raise :class:`SceneCodeError`, naming the function and its line, instead of
+whatever they raise: that is the scene's bug, not ngat's.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import importlib.util
+import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +36,7 @@ __all__ = [
     "SceneNotFound",
     "SceneFileError",
     "SceneTimesError",
+    "SceneCodeError",
 ]
 
 GEOMETRIES = Path(geometries.__file__).resolve().parent
@@ -46,6 +52,10 @@ class SceneFileError(SceneNotFound):
 
 class SceneTimesError(ValueError):
     """A scene's load times are not a strictly increasing sequence."""
+
+
+class SceneCodeError(SceneError):
+    """A function of a scene (geometry, mesh, load or crack) raised an exception."""
 
 
 @dataclass(frozen=True)
@@ -176,6 +186,45 @@ def check_times(name: str, times: np.ndarray) -> None:
         )
 
 
+def _guarded(scene: str, role: str, function: Callable) -> Callable:
+    """Return ``function`` raising :class:`SceneCodeError` for any exception of its own."""
+
+    @functools.wraps(function)
+    def call(*args):
+        try:
+            return function(*args)
+        except Exception as error:
+            code = getattr(function, "__code__", None)
+            lines = [
+                f"{frame.filename}, line {frame.lineno}"
+                for frame in traceback.extract_tb(error.__traceback__)
+                if code is not None and frame.filename == code.co_filename
+            ]
+            where = f" ({lines[-1]})" if lines else ""
+            raise SceneCodeError(
+                f"scene '{scene}': {role} raised {type(error).__name__}: {error}{where}; fix the "
+                "scene (--debug shows the traceback)"
+            ) from error
+
+    return call
+
+
+def guarded(scene: Scene) -> Scene:
+    """Return ``scene`` with every function of it wrapped to raise :class:`SceneCodeError`."""
+    return dataclasses.replace(
+        scene,
+        geometry=scene.geometry and _guarded(scene.name, "its geometry function", scene.geometry),
+        mesh=scene.mesh and _guarded(scene.name, "its mesh function", scene.mesh),
+        loads={
+            name: _guarded(scene.name, f"the load of region '{name}'", load)
+            for name, load in scene.loads.items()
+        },
+        crack=_guarded(scene.name, "its crack function", scene.crack)
+        if callable(scene.crack)
+        else scene.crack,
+    )
+
+
 def scene_names() -> list[str]:
     """Return the names of the package's scenes."""
     return sorted(
@@ -185,6 +234,8 @@ def scene_names() -> list[str]:
 
 def load_scene(name_or_path: str) -> Scene:
     """Return the scene of a package scene name or of a scene file's path.
+
+    The scene's functions raise :class:`SceneCodeError` (see :func:`guarded`).
 
     Raises
     ------
@@ -225,4 +276,4 @@ def load_scene(name_or_path: str) -> Scene:
         raise SceneNotFound(
             f"scene file '{path}' defines no scene: add 'scene = Scene(...)' (ngat.scene.Scene)"
         )
-    return scene
+    return guarded(scene)

@@ -320,9 +320,24 @@ class ATState:
 
     # -- load -------------------------------------------------------------------------------
     def apply_load(self, t: float) -> None:
-        """Set the load parameter to ``t`` and u = g(t) on every Dirichlet region's components."""
+        """Set the load parameter to ``t`` and u = g(t) on every Dirichlet region's components.
+
+        Raises
+        ------
+        SceneError
+            If g(t) is NaN or infinite somewhere, naming the region and a point.
+        """
         self.t.Set(t)
         self._interpolate(self.loads, self.u_values)
+        for name, dofs in self.region_dofs.items():
+            bad = dofs & ~np.isfinite(self.u_values)
+            if bad.any():
+                x, y = self.arrays.coords[np.flatnonzero(bad)[0] % self.arrays.nv]
+                raise SceneError(
+                    f"the load of region '{name}' is not a finite number at t={t:g} (NaN or Inf "
+                    f"at {bad.sum()} of its {dofs.sum()} DOFs, e.g. at ({x:.4g}, {y:.4g})): "
+                    "fix its load function"
+                )
 
     def _interpolate(self, functions: Mapping[str, ngsolve.CoefficientFunction], out: np.ndarray):
         """Write each region's function into ``out`` at that region's vertices (interpolation).

@@ -7,7 +7,9 @@ sweep folder, named after its grid values (``eps=0.05_tol=0.3``); a failed run i
 its error and does not stop the others. ``sweep.csv`` collects one row per run (parameters,
 status, wall time, final energies, fracture time) and is rewritten atomically whenever a run
 ends. Re-running a sweep skips the runs whose ``summary.json`` says ``completed`` (same scene and
-parameters) and resumes interrupted ones from their checkpoint. :func:`plot_sweep` draws
+parameters) and resumes interrupted ones from their checkpoint. A sweep holds the lock of its
+folder and each run that of its own (:mod:`ngat.lock`): a second sweep of the same folder is
+refused, and a run whose folder is in use fails with that error. :func:`plot_sweep` draws
 columns of ``sweep.csv`` against a grid parameter (:func:`ngat.plotting.sweep_figure`).
 
 With a remote scheduler, the workers need ngat installed and the sweep folder (and a scene file
@@ -27,6 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from ngat.lock import folder_lock
 from ngat.output import check_results_folder, read_summary, write_atomic
 from ngat.parameters import ParameterError, Parameters
 
@@ -154,15 +157,16 @@ def run_combination(
     try:
         loaded = load_scene(scene)
         parameters, times = loaded.configure(quick, {**(overrides or {}), **values})
-        existing = read_summary(Path(folder))
-        if existing and existing.get("status") == "completed":
-            # Same scene and parameters, or an error naming the difference.
-            check_results_folder(Path(folder), loaded.name, parameters.flat(), times, "resume")
-            row.update(status="completed", skipped=True, **_result_row(existing))
-            return row
-        # An interrupted run of the same combination continues from its checkpoint.
-        resume = bool(existing) and existing.get("scene") == loaded.name
-        run(loaded, parameters, times, Path(folder), resume=resume)
+        with folder_lock(folder):
+            existing = read_summary(Path(folder))
+            if existing and existing.get("status") == "completed":
+                # Same scene and parameters, or an error naming the difference.
+                check_results_folder(Path(folder), loaded.name, parameters.flat(), times, "resume")
+                row.update(status="completed", skipped=True, **_result_row(existing))
+                return row
+            # An interrupted run of the same combination continues from its checkpoint.
+            resume = bool(existing) and existing.get("scene") == loaded.name
+            run(loaded, parameters, times, Path(folder), resume=resume)
         row.update(status="completed", **_result_row(read_summary(Path(folder))))
     except Exception as error:  # a failed run is a result of the sweep, not its end
         row.update(error=f"{type(error).__name__}: {error}".replace("\n", " "))
@@ -225,8 +229,6 @@ def sweep(
     SceneNotFound
         For an unknown scene.
     """
-    from dask.distributed import Client, LocalCluster, as_completed
-
     from ngat.output import OutputError
     from ngat.scene import load_scene
 
@@ -236,32 +238,53 @@ def sweep(
     if scene_path.suffix == ".py" or len(scene_path.parts) > 1:
         scene = str(scene_path.resolve())
     load_scene(scene)
-    folder = Path(folder).resolve()
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        write_atomic(
-            folder / "sweep.json",
-            json.dumps(
-                {
-                    "scene": scene,
-                    "grid": {k: list(v) for k, v in grid.items()},
-                    "overrides": dict(overrides or {}),
-                    "quick": quick,
-                },
-                indent=2,
-                default=str,
-            ),
-        )
-    except OSError as error:
-        raise OutputError(
-            f"sweep folder '{folder}' is not writable ({error.strerror}); choose another with --out"
-        ) from None
     names = list(grid)
     combinations = [dict(zip(names, c, strict=True)) for c in itertools.product(*grid.values())]
-    rows: dict[str, dict[str, Any]] = {}
     order = [run_name(values) for values in combinations]
     if len(set(order)) != len(order):
         raise ParameterError("sweep grid: two values of a parameter give the same run name")
+    folder = Path(folder).resolve()
+    with folder_lock(folder):
+        try:
+            write_atomic(
+                folder / "sweep.json",
+                json.dumps(
+                    {
+                        "scene": scene,
+                        "grid": {k: list(v) for k, v in grid.items()},
+                        "overrides": dict(overrides or {}),
+                        "quick": quick,
+                    },
+                    indent=2,
+                    default=str,
+                ),
+            )
+        except OSError as error:
+            raise OutputError(
+                f"sweep folder '{folder}' is not writable ({error.strerror}); choose another "
+                "with --out"
+            ) from None
+        return _run_on_dask(
+            scene, combinations, order, folder, scheduler, quick, overrides, workers, on_result
+        )
+
+
+def _run_on_dask(
+    scene: str,
+    combinations: list[dict[str, Any]],
+    order: list[str],
+    folder: Path,
+    scheduler: str | None,
+    quick: bool,
+    overrides: Mapping[str, Any] | None,
+    workers: int | None,
+    on_result: RowCallback | None,
+) -> list[dict[str, Any]]:
+    """Run the combinations (named ``order``) on a Dask cluster: :func:`sweep` after its checks."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    names = list(combinations[0])
+    rows: dict[str, dict[str, Any]] = {}
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(

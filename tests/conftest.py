@@ -41,9 +41,10 @@ def quick_run(tmp_path_factory):
 def tiny_run():
     """A tiny run of the two-slits geometry, as ``(scene, parameters)`` for ``ngat.run``.
 
-    Five load steps on the coarse initial mesh (adapt=fixed): about a second.
+    Five load steps on the coarse initial mesh (adapt=fixed, under-resolved on purpose, so
+    ``resolve_eps=false``): about a second.
     """
     import dataclasses
 
     scene = dataclasses.replace(load_scene("two-slits"), times=[0.0, 0.4, 0.8, 1.2, 1.6])
-    return scene, {"maxh": 0.5, "eps": 0.2, "adapt": "fixed"}
+    return scene, {"maxh": 0.5, "eps": 0.2, "adapt": "fixed", "resolve_eps": False}

@@ -46,7 +46,7 @@ CASES = {
         ["run", "two-slits", "--set", "maxh=1e-300"],
         ["maxh=1e-300 is too small for the geometry (area 42)", "choose maxh >= 0.0031"],
     ),
-    "maxh infinite": (["run", "two-slits", "--set", "maxh=inf"], ["maxh must be a positive"]),
+    "maxh infinite": (["run", "two-slits", "--set", "maxh=inf"], ["maxh must be a finite number"]),
 }
 
 

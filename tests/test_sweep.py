@@ -82,7 +82,9 @@ def test_a_run_failing_at_run_time_does_not_stop_the_others(tmp_path, scheduler)
     )
     rows = sweep(str(scene), {"maxh": [0.1, 0.05]}, tmp_path / "sweep", scheduler=scheduler)
     assert [r["status"] for r in rows] == ["completed", "failed"]
-    assert rows[1]["error"] == "RuntimeError: mesher gave up"
+    assert rows[1]["error"].startswith(
+        "SceneCodeError: scene 'fragile': its mesh function raised RuntimeError: mesher gave up ("
+    )
     assert rows[1]["run"] == run_name({"maxh": "0.050"}) == "maxh=0.05"
 
 
