@@ -61,7 +61,6 @@ scene = Scene(
         "gc": GC,
         "eps": LENGTH_SCALE / 2,
         "maxh": 0.05,
-        "nonlinear": "am",
-    },  # fmt: skip
+    },
     quick={"eps": 0.015 / 2, "band_h": 0.35, "floor": 0.08},
 )

@@ -98,8 +98,7 @@ def make_scene(
             "poisson": POISSON,
             "eps": eps,
             "maxh": 0.1,
-            "nonlinear": "am",
-        },  # fmt: skip
+        },
         quick={"times": TIMES[::4], "tol_rel": 0.3},
     )
 

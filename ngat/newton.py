@@ -2,11 +2,14 @@
 
 I_j(u, v) of eq. (7) is a polynomial in the nodal values; its gradient and Hessian are exact
 and, unlike alternating minimisation, Newton sees the coupling block ∂²I_j/∂u∂v. With
-c_T = mean_T(v²) + η, the lumped mass m and K_T the element stiffness matrix:
+c_T = mean_T(v²) + η, the lumped mass m and K_T the element matrix of the model's a_j
+(:mod:`ngat.elasticity`; ∇φ_a·∇φ_b|T| for the anti-plane model):
 
-- ∂I/∂u = 2 Σ_T c_T K_T u,  ∂I/∂v = 2 (B(u) v − α m)  (B: the matrix of b_j, Definition 2);
-- ∂²I/∂u² = 2 Σ_T c_T K_T,  ∂²I/∂v² = 2 B(u),
-  ∂²I/∂v_a∂u_b = (4/3) |T| v_a ∇u_T·∇φ_b on each element T ∋ a, b.
+- ∂I/∂u = 2 Σ_T c_T K_T u,  ∂I/∂v = 2 G_c (B(u) v − α m)  (B: the matrix of b_j, Definition 2,
+  with W(u)/G_c in place of |∇u|²);
+- ∂²I/∂u² = 2 Σ_T c_T K_T,  ∂²I/∂v² = 2 G_c B(u),
+  ∂²I/∂v_a∂u_b = (4/3) v_a (K_T u)_b on each element T ∋ a, b (for the anti-plane model
+  (4/3) |T| v_a ∇u_T·∇φ_b).
 
 :func:`energy_form` states the same functional as an NGSolve ``Variation`` with the vertex
 rule (the definition; a test checks the vectorised gradient and Hessian against NGSolve's).
@@ -34,6 +37,7 @@ from ngsolve import BilinearForm, Variation, grad
 from ngsolve.la import SparseMatrixd
 from scipy.linalg import eigh_tridiagonal
 
+from ngat.elasticity import AntiPlane, Elasticity
 from ngat.forms import lumped_dx
 from ngat.parameters import ModelParameters, ParameterError
 from ngat.state import ATState, lumped_energies
@@ -43,15 +47,19 @@ __all__ = ["NewtonSolver", "energy_form"]
 log = logging.getLogger(__name__)
 
 
-def energy_form(space: ngsolve.FESpace, model: ModelParameters) -> BilinearForm:
-    """Return I_j(u, v) (eq. 7) as an NGSolve energy on the product space P1 × P1.
+def energy_form(
+    space: ngsolve.FESpace, model: ModelParameters, elasticity: Elasticity | None = None
+) -> BilinearForm:
+    """Return I_j(u, v) (eq. 7) as an NGSolve energy on the product space of u and v.
 
     ``form.Energy``, ``form.Apply`` and ``form.AssembleLinearization`` then give I_j, its
-    gradient and its Hessian.
+    gradient and its Hessian. ``elasticity`` is the model's energy density (default the
+    anti-plane |∇u|²); the space is then its space of u times P1.
     """
     u, v = space.TrialFunction()
-    energy = (v * v + model.eta) * grad(u) * grad(u)
-    energy += model.alpha * (1 - v) * (1 - v) + model.eps * grad(v) * grad(v)
+    density = (elasticity or AntiPlane()).bilinear(u, u)
+    energy = (v * v + model.eta) * density
+    energy += model.gc * (model.alpha * (1 - v) * (1 - v) + model.eps * grad(v) * grad(v))
     form = BilinearForm(space)
     form += Variation(energy * lumped_dx())
     return form
@@ -109,51 +117,40 @@ class NewtonSolver:
     def _setup(self) -> None:
         """Build the block graph, the scatter positions and the work vectors for this mesh.
 
-        The Hessian's graph is the P1 graph of a_j in each of the four blocks. Row i of the
-        u-block holds the P1 columns of row i, then the same shifted by n; so does row n + i.
-        Every position follows from the P1 matrix's CSR layout by arithmetic.
+        The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model) and
+        of v (shifted behind u's): four blocks uu, vv, vu, uv. Its graph is the union of the
+        element couplings; every local entry's position follows by a sorted search.
         """
         state = self.state
-        arrays, assembler = state.arrays, state.assembler
-        n, ne = arrays.nv, arrays.ne
-        _, p1_cols, p1_rowptr = state.a_matrix.CSR()
-        p1_cols = np.asarray(p1_cols, dtype=np.int64)
-        p1_rowptr = np.asarray(p1_rowptr, dtype=np.int64)
-        nnz, degree = len(p1_cols), np.diff(p1_rowptr)
-        p1_rows = np.repeat(np.arange(n), degree)
+        arrays = state.arrays
+        nu, n = len(state.u_values), arrays.nv
+        size = nu + n
+        el_u = state.elasticity.element_dofs(arrays)
+        el_v = arrays.elements + nu
 
-        def block_position(p, v_row, v_col):
-            """Position in the block CSR of P1 entry p in the (u|v row, u|v column) block."""
-            i = p1_rows[p]
-            return v_row * 2 * nnz + 2 * p1_rowptr[i] + v_col * degree[i] + p - p1_rowptr[i]
+        def keys(rows, cols):
+            return (rows[:, :, None] * size + cols[:, None, :]).ravel()
 
-        entries = np.arange(nnz)
-        self.nnz = 4 * nnz
-        self.entry_rows = np.empty(self.nnz, dtype=np.int64)
-        self.entry_cols = np.empty(self.nnz, dtype=np.int64)
-        for v_row in (0, 1):
-            for v_col in (0, 1):
-                at = block_position(entries, v_row, v_col)
-                self.entry_rows[at] = p1_rows + v_row * n
-                self.entry_cols[at] = p1_cols + v_col * n
-        self.matrix = SparseMatrixd.CreateFromCOO(
-            self.entry_rows, self.entry_cols, np.ones(self.nnz), 2 * n, 2 * n
-        )
-        local = assembler.position
-        transposed = local.reshape(ne, 3, 3).transpose(0, 2, 1).ravel()
-        # The order of hessian_values: uu, vv, vu (row v_a, column u_b), uv (its transpose).
-        self.position = np.concatenate(
+        vu_rows = np.broadcast_to(el_v[:, :, None], (arrays.ne, 3, el_u.shape[1]))
+        vu_cols = np.broadcast_to(el_u[:, None, :], vu_rows.shape)
+        # The order of hessian_values: uu, vv, vu (row v_a, column u_b), uv (its transpose,
+        # listed in vu's order).
+        local = np.concatenate(
             [
-                block_position(local, 0, 0),
-                block_position(local, 1, 1),
-                block_position(local, 1, 0),
-                block_position(transposed, 0, 1),
+                keys(el_u, el_u),
+                keys(el_v, el_v),
+                (vu_rows * size + vu_cols).ravel(),
+                (vu_cols * size + vu_rows).ravel(),
             ]
         )
-        diagonal = assembler.diagonal
-        self.diagonal = np.concatenate(
-            [block_position(diagonal, 0, 0), block_position(diagonal, 1, 1)]
+        graph = np.unique(local)
+        self.nnz = len(graph)
+        self.entry_rows, self.entry_cols = graph // size, graph % size
+        self.matrix = SparseMatrixd.CreateFromCOO(
+            self.entry_rows, self.entry_cols, np.ones(self.nnz), size, size
         )
+        self.position = np.searchsorted(graph, local)
+        self.diagonal = np.searchsorted(graph, np.arange(size) * (size + 1))
         self.inverse = None
         self.certified = 0.0
         self.rhs = self.matrix.CreateColVector()
@@ -162,33 +159,40 @@ class NewtonSolver:
 
     def gradient(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return ∇I_j at (u, v), stacked (∂I/∂u, ∂I/∂v)."""
-        arrays, model = self.state.arrays, self.state.model
+        state = self.state
+        arrays, model, density = state.arrays, state.model, state.elasticity
         el, area = arrays.elements, arrays.area
-        grad_u, grad_v = arrays.gradient(u), arrays.gradient(v)
+        flux, grad_v = density.flux(density.gradient(arrays, u)), arrays.gradient(v)
         c = arrays.vertex_mean(v * v) + model.eta
-        flux_u = np.einsum("eak,ek->ea", arrays.grad_phi, grad_u) * (area * c)[:, None]
+        # (K_T u)_(i,a) = |T| s_i·∇φ_a: a_j(v; u, φ_a e_i) on T.
+        flux_u = np.einsum("eak,eik->eia", arrays.grad_phi, flux) * (area * c)[:, None, None]
         flux_v = np.einsum("eak,ek->ea", arrays.grad_phi, grad_v) * area[:, None]
-        g_u = 2 * np.bincount(el.ravel(), weights=flux_u.ravel(), minlength=arrays.nv)
+        g_u = 2 * np.bincount(
+            density.element_dofs(arrays).ravel(), weights=flux_u.ravel(), minlength=len(u)
+        )
+        energy = density.density(arrays, u)
         strain = np.bincount(
-            el.ravel(), weights=np.repeat(area * (grad_u**2).sum(1) / 3, 3), minlength=arrays.nv
+            el.ravel(), weights=np.repeat(area * energy / 3, 3), minlength=arrays.nv
         )
         g_v = 2 * (
-            strain * v - model.alpha * arrays.mass * (1 - v)
-            + model.eps * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
+            strain * v - model.gc * model.alpha * arrays.mass * (1 - v)
+            + model.gc * model.eps
+            * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
         )  # fmt: skip
         return np.concatenate([g_u, g_v])
 
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
-        arrays, model = self.state.arrays, self.state.model
+        state = self.state
+        arrays, model, density = state.arrays, state.model, state.elasticity
         el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
-        grad_u = arrays.gradient(u)
+        flux = density.flux(density.gradient(arrays, u))
         c = arrays.vertex_mean(v * v) + model.eta
-        uu = 2 * c[:, None, None] * stiffness
-        mass_term = area * ((grad_u**2).sum(1) + model.alpha) / 3
-        vv = 2 * model.eps * stiffness
+        uu = 2 * c[:, None, None] * state.assembler.stiffness
+        mass_term = area * (density.density(arrays, u) + model.gc * model.alpha) / 3
+        vv = 2 * model.gc * model.eps * stiffness
         vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
-        u_flux = np.einsum("ek,ebk->eb", grad_u, arrays.grad_phi)
+        u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
         vu = (4 / 3) * area[:, None, None] * v[el][:, :, None] * u_flux[:, None, :]
         local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
         return np.bincount(self.position, weights=local, minlength=self.nnz)
@@ -206,12 +210,11 @@ class NewtonSolver:
         if self._arrays is not state.arrays:
             with state.timer("assembly"):
                 self._setup()
-        n = state.arrays.nv
         u, v = state.u_values.copy(), state.v_values.copy()
         upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
         with state.timer("assembly"):
             gradient = self.gradient(u, v)
-            g_v = gradient[n:]
+            g_v = gradient[len(u) :]
             held = np.concatenate(
                 [state.dirichlet, crack | ((v <= 0) & (g_v > 0)) | ((v >= upper) & (g_v < 0))]
             )

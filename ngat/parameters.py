@@ -374,12 +374,6 @@ class Parameters:
                 )
         for group in self._groups().values():
             group.check()
-        if self.model.model != "antiplane" and "newton" in self.solver.nonlinear:
-            raise ParameterError(
-                f"nonlinear={self.solver.nonlinear} is not available for model="
-                f"{self.model.model} yet (its Hessian is the anti-plane one): set nonlinear=am, "
-                "overrelaxed or anderson"
-            )
         if self.model.model != "antiplane" and self.solver.linear_solver != "direct":
             raise ParameterError(
                 f"linear_solver={self.solver.linear_solver} is scalar (h1amg refuses vector "
