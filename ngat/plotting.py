@@ -35,6 +35,7 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from ngat.crack import crack_tips, mesh_edges
+from ngat.rendering import DPI, draw_field_matplotlib, draw_field_pyvista, grid_triangles
 from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
@@ -52,8 +53,6 @@ CRACK_THRESHOLD = 0.1
 
 ZOOM_FRACTION = 0.05
 """Default zoom radius as a fraction of the diagonal of the body's bounding box."""
-
-DPI = 200
 
 
 class PlotError(ValueError):
@@ -182,7 +181,7 @@ def plot_results(
         if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
             written.append(plot_field(snapshot, frame.t, path, renderer))
-    points, triangles = _triangles(grid)
+    points, triangles = grid_triangles(grid)
     written.append(plot_mesh(points, triangles, None, final.t, folder / "mesh_final.png"))
     if zoom is None:
         zoom = default_zoom(points, triangles, grid.point_data["v"], _scene_slits(folder, slits))
@@ -267,12 +266,6 @@ def _spacing(t: np.ndarray) -> float:
     return float(np.min(np.diff(t))) if len(t) > 1 else 1.0
 
 
-def _triangles(grid: pyvista.UnstructuredGrid) -> tuple[np.ndarray, np.ndarray]:
-    """Return the (n, 2) points and (ne, 3) triangles of a VTU read by pyvista."""
-    triangles = grid.cells_dict[pyvista.CellType.TRIANGLE]
-    return np.asarray(grid.points)[:, :2], np.asarray(triangles, dtype=np.int64)
-
-
 def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: str) -> Path:
     """Draw the phase field v of one step, colour range [0, 1], into ``path``.
 
@@ -288,77 +281,8 @@ def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: s
         ``"pyvista"`` (off-screen VTK) or ``"matplotlib"`` (``tripcolor``).
     """
     if renderer == "pyvista":
-        return _plot_field_pyvista(grid, t, path)
-    points, triangles = _triangles(grid)
-    xmin, ymin = points.min(axis=0)
-    xmax, ymax = points.max(axis=0)
-    # 0.6 in more than the body for the title and the tick labels (a flat body lost its title).
-    fig = Figure(figsize=(7, 7 * (ymax - ymin) / (xmax - xmin) + 0.6), layout="constrained")
-    ax = fig.subplots()
-    image = ax.tripcolor(
-        Triangulation(points[:, 0], points[:, 1], triangles),
-        np.asarray(grid.point_data["v"]),
-        shading="gouraud",
-        cmap="viridis",
-        vmin=0,
-        vmax=1,
-    )
-    fig.colorbar(image, ax=ax, label="v", shrink=0.9)
-    ax.set_xlim(xmin, xmax)
-    ax.set_ylim(ymin, ymax)
-    ax.set_aspect("equal")
-    ax.set_title(f"v at t = {t:g}")
-    fig.savefig(path, dpi=DPI)
-    return path
-
-
-def _plot_field_pyvista(grid: pyvista.UnstructuredGrid, t: float, path: Path) -> Path:
-    """Render v with VTK off-screen; the camera looks down z with parallel projection."""
-    xmin, xmax, ymin, ymax = grid.bounds[:4]
-    width, height = xmax - xmin, ymax - ymin
-    # The body fills the left BODY of the window (with a 5 % margin); the colour bar the rest.
-    body, margin = 0.82, 1.05
-    pixels_y = 1200
-    pixels_x = int(pixels_y * margin * width / height / body)
-    plotter = pyvista.Plotter(off_screen=True, window_size=(pixels_x, pixels_y))
-    try:
-        plotter.set_background("white")
-        plotter.add_mesh(
-            grid,
-            scalars="v",
-            cmap="viridis",
-            clim=(0, 1),
-            lighting=False,
-            scalar_bar_args={
-                "title": "v",
-                "vertical": True,
-                "position_x": 0.85,
-                "position_y": 0.1,
-                "width": 0.06,
-                "height": 0.8,
-                "fmt": "%.1f",
-                "n_labels": 6,
-                "title_font_size": 36,
-                "label_font_size": 28,
-                "color": "black",
-            },
-        )
-        label = (int(0.83 * pixels_x), int(0.025 * pixels_y))
-        plotter.add_text(f"t = {t:g}", position=label, font_size=14, color="black")
-        plotter.enable_parallel_projection()
-        camera = plotter.camera
-        window_width = margin * height * pixels_x / pixels_y
-        x = 0.5 * (xmin + xmax) + (0.5 - body / 2) * window_width
-        y = 0.5 * (ymin + ymax)
-        camera.focal_point = (x, y, 0.0)
-        camera.position = (x, y, 1.0)
-        camera.up = (0.0, 1.0, 0.0)
-        camera.parallel_scale = 0.5 * margin * height
-        plotter.reset_camera_clipping_range()
-        plotter.screenshot(str(path))
-    finally:
-        plotter.close()
-    return path
+        return draw_field_pyvista(grid, f"t = {t:g}", path)
+    return draw_field_matplotlib(grid, f"v at t = {t:g}", path)
 
 
 def default_zoom(
