@@ -3,10 +3,13 @@
 :func:`plot_results` reads ``energies.csv`` and the VTK series (``fields.pvd``, ``fields/*.vtu``)
 of a finished or partial run and writes PNGs into the folder:
 
-- ``energies.png``: bulk, surface and total energy, the reaction force, the number of elements
-  and the alternating-minimisation iterations against the load time t;
+- ``energies.png``: bulk, surface and total energy, the reaction force (plane models: also the
+  ``force_<region>_x`` and ``_y`` columns, labelled), the number of elements and the
+  alternating-minimisation iterations against the load time t;
 - ``v_final.png`` and ``v_t<t>.png``: the phase field v at the last step and at a few load times,
   rendered off-screen by pyvista (matplotlib ``tripcolor`` where VTK cannot render off-screen);
+- ``u_final.png`` (plane models only): |u| at the last step on the body deformed by a scaled u
+  (:mod:`ngat.deformation`), the scale written on the picture;
 - ``mesh_final.png``: the edges of the last mesh; ``mesh_zoom.png``: a window around a crack tip.
 
 :func:`sweep_figure` draws the result columns of a sweep (``sweep.csv``) against a grid
@@ -22,6 +25,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import re
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -35,6 +39,7 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from ngat.crack import crack_tips, mesh_edges
+from ngat.deformation import has_plane_displacement, plot_displacement
 from ngat.rendering import DPI, draw_field_matplotlib, draw_field_pyvista, grid_triangles
 from ngat.results import Frame, field_series, read_fields, read_records
 
@@ -42,6 +47,7 @@ __all__ = [
     "plot_results",
     "read_energies",
     "offscreen_rendering_works",
+    "energies_figure",
     "sweep_figure",
     "PlotError",
 ]
@@ -177,6 +183,8 @@ def plot_results(
         return written
     final = frames[-1]
     written.append(plot_field(grid, final.t, folder / "v_final.png", renderer))
+    if has_plane_displacement(grid):
+        written.append(plot_displacement(grid, final.t, folder / "u_final.png", renderer))
     for frame in _chosen_frames(frames[:-1], times):
         if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
@@ -218,7 +226,7 @@ def _scene_slits(folder: Path, slits: Sequence | None) -> Sequence:
 
 
 def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
-    """Draw energies, reaction force, elements and iterations against t into ``path``.
+    """Draw energies, reaction forces, elements and iterations against t into ``path``.
 
     Parameters
     ----------
@@ -226,6 +234,21 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
         Columns of ``energies.csv`` (:func:`read_energies`).
     path
         PNG file to write.
+    """
+    energies_figure(energies).savefig(path, dpi=DPI)
+    return path
+
+
+def energies_figure(energies: dict[str, np.ndarray]) -> Figure:
+    """Return the figure of ``energies.png``: four panels against the load time t.
+
+    Energies; the reaction force ``force`` (plane models: with the columns ``force_<region>_x``
+    and ``_y``, named in a legend); elements; alternating-minimisation iterations.
+
+    Parameters
+    ----------
+    energies
+        Columns of ``energies.csv`` (:func:`read_energies`).
     """
     t = energies["t"]
     fig = Figure(figsize=(7, 9), layout="constrained")
@@ -237,8 +260,14 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_ylabel("energy")
     ax.legend(loc="upper left", frameon=False)
     ax = axes[1]
+    components = [name for name in energies if re.fullmatch(r"force_.+_[xy]", name)]
     if "force" in energies:
-        ax.plot(t, energies["force"], "C3.-", markersize=3)
+        label = "force (dI/dt)" if components else None
+        ax.plot(t, energies["force"], "C3.-", markersize=3, label=label)
+    for i, name in enumerate(components):
+        ax.plot(t, energies[name], "--", color=f"C{4 + i}", label=name)
+    if components:
+        ax.legend(loc="upper left", frameon=False, fontsize="small")
     ax.set_ylabel("reaction force")
     ax.axhline(0, color="0.7", lw=0.5)
     ax = axes[2]
@@ -258,8 +287,7 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_xlabel("load time t")
     for ax in axes:
         ax.grid(True, lw=0.3, alpha=0.5)
-    fig.savefig(path, dpi=DPI)
-    return path
+    return fig
 
 
 def _spacing(t: np.ndarray) -> float:

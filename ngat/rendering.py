@@ -3,7 +3,7 @@
 :func:`draw_field_matplotlib` draws with ``tripcolor`` (no display needed; what every run uses at
 its end), :func:`draw_field_pyvista` renders with VTK off-screen (``ngat plot`` where VTK can).
 Both draw the body as seen from above, whole, with a colour bar; :mod:`ngat.plotting` uses them
-for the phase field v.
+for the phase field v, :mod:`ngat.deformation` for |u| on the deformed body.
 """
 
 from __future__ import annotations
