@@ -5,7 +5,7 @@
 :func:`plan_run` finds the scene, applies the parameter changes (checked as ``--set`` checks
 them) and checks the results folder; :func:`ngat.driver.run` computes the load history;
 :func:`pictures_on_exit` draws ``energies.png``, ``v_final.png``, ``mesh_final.png`` and
-``mesh_zoom.png`` when the run ends, however it ends.
+``mesh_zoom.png`` (plane models: also ``u_final.png``) when the run ends, however it ends.
 """
 
 from __future__ import annotations
@@ -122,6 +122,8 @@ def plan_run(
 def draw_pictures(folder: Path, slits: Sequence = ()) -> list[Path]:
     """Draw the pictures a run leaves: energies, final v, the final mesh, whole and zoomed.
 
+    Plane models add |u| on the deformed body (``u_final.png``).
+
     v is drawn with matplotlib (no VTK window, nothing printed); ``ngat plot`` draws the same
     set and more (snapshots of v) with VTK where it can.
 
@@ -221,8 +223,9 @@ def run(
     resume
         Continue the interrupted run in the folder (same scene, parameters and times).
     plots
-        Draw ``energies.png``, ``v_final.png``, ``mesh_final.png`` and ``mesh_zoom.png`` when the
-        run ends (:func:`draw_pictures`); also after a failure, for the steps it finished.
+        Draw ``energies.png``, ``v_final.png``, ``mesh_final.png`` and ``mesh_zoom.png`` (plane
+        models: also ``u_final.png``) when the run ends (:func:`draw_pictures`); also after a
+        failure, for the steps it finished.
     on_step
         Called with each load step's record as the step ends.
     **parameters

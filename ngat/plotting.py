@@ -3,10 +3,13 @@
 :func:`plot_results` reads ``energies.csv`` and the VTK series (``fields.pvd``, ``fields/*.vtu``)
 of a finished or partial run and writes PNGs into the folder:
 
-- ``energies.png``: bulk, surface and total energy, the reaction force, the number of elements
-  and the alternating-minimisation iterations against the load time t;
+- ``energies.png``: bulk, surface and total energy, the reaction force (plane models: also the
+  ``force_<region>_x`` and ``_y`` columns, labelled), the number of elements and the
+  alternating-minimisation iterations against the load time t;
 - ``v_final.png`` and ``v_t<t>.png``: the phase field v at the last step and at a few load times,
   rendered off-screen by pyvista (matplotlib ``tripcolor`` where VTK cannot render off-screen);
+- ``u_final.png`` (plane models only): |u| at the last step on the body deformed by a scaled u
+  (:mod:`ngat.deformation`), the scale written on the picture;
 - ``mesh_final.png``: the edges of the last mesh; ``mesh_zoom.png``: a window around a crack tip.
 
 :func:`sweep_figure` draws the result columns of a sweep (``sweep.csv``) against a grid
@@ -22,6 +25,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import re
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -35,12 +39,15 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from ngat.crack import crack_tips, mesh_edges
+from ngat.deformation import has_plane_displacement, plot_displacement
+from ngat.rendering import DPI, draw_field_matplotlib, draw_field_pyvista, grid_triangles
 from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
     "plot_results",
     "read_energies",
     "offscreen_rendering_works",
+    "energies_figure",
     "sweep_figure",
     "PlotError",
 ]
@@ -52,8 +59,6 @@ CRACK_THRESHOLD = 0.1
 
 ZOOM_FRACTION = 0.05
 """Default zoom radius as a fraction of the diagonal of the body's bounding box."""
-
-DPI = 200
 
 
 class PlotError(ValueError):
@@ -178,11 +183,13 @@ def plot_results(
         return written
     final = frames[-1]
     written.append(plot_field(grid, final.t, folder / "v_final.png", renderer))
+    if has_plane_displacement(grid):
+        written.append(plot_displacement(grid, final.t, folder / "u_final.png", renderer))
     for frame in _chosen_frames(frames[:-1], times):
         if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
             written.append(plot_field(snapshot, frame.t, path, renderer))
-    points, triangles = _triangles(grid)
+    points, triangles = grid_triangles(grid)
     written.append(plot_mesh(points, triangles, None, final.t, folder / "mesh_final.png"))
     if zoom is None:
         zoom = default_zoom(points, triangles, grid.point_data["v"], _scene_slits(folder, slits))
@@ -219,7 +226,7 @@ def _scene_slits(folder: Path, slits: Sequence | None) -> Sequence:
 
 
 def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
-    """Draw energies, reaction force, elements and iterations against t into ``path``.
+    """Draw energies, reaction forces, elements and iterations against t into ``path``.
 
     Parameters
     ----------
@@ -227,6 +234,21 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
         Columns of ``energies.csv`` (:func:`read_energies`).
     path
         PNG file to write.
+    """
+    energies_figure(energies).savefig(path, dpi=DPI)
+    return path
+
+
+def energies_figure(energies: dict[str, np.ndarray]) -> Figure:
+    """Return the figure of ``energies.png``: four panels against the load time t.
+
+    Energies; the reaction force ``force`` (plane models: with the columns ``force_<region>_x``
+    and ``_y``, named in a legend); elements; alternating-minimisation iterations.
+
+    Parameters
+    ----------
+    energies
+        Columns of ``energies.csv`` (:func:`read_energies`).
     """
     t = energies["t"]
     fig = Figure(figsize=(7, 9), layout="constrained")
@@ -238,8 +260,14 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_ylabel("energy")
     ax.legend(loc="upper left", frameon=False)
     ax = axes[1]
+    components = [name for name in energies if re.fullmatch(r"force_.+_[xy]", name)]
     if "force" in energies:
-        ax.plot(t, energies["force"], "C3.-", markersize=3)
+        label = "force (dI/dt)" if components else None
+        ax.plot(t, energies["force"], "C3.-", markersize=3, label=label)
+    for i, name in enumerate(components):
+        ax.plot(t, energies[name], "--", color=f"C{4 + i}", label=name)
+    if components:
+        ax.legend(loc="upper left", frameon=False, fontsize="small")
     ax.set_ylabel("reaction force")
     ax.axhline(0, color="0.7", lw=0.5)
     ax = axes[2]
@@ -259,18 +287,11 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_xlabel("load time t")
     for ax in axes:
         ax.grid(True, lw=0.3, alpha=0.5)
-    fig.savefig(path, dpi=DPI)
-    return path
+    return fig
 
 
 def _spacing(t: np.ndarray) -> float:
     return float(np.min(np.diff(t))) if len(t) > 1 else 1.0
-
-
-def _triangles(grid: pyvista.UnstructuredGrid) -> tuple[np.ndarray, np.ndarray]:
-    """Return the (n, 2) points and (ne, 3) triangles of a VTU read by pyvista."""
-    triangles = grid.cells_dict[pyvista.CellType.TRIANGLE]
-    return np.asarray(grid.points)[:, :2], np.asarray(triangles, dtype=np.int64)
 
 
 def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: str) -> Path:
@@ -288,77 +309,8 @@ def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: s
         ``"pyvista"`` (off-screen VTK) or ``"matplotlib"`` (``tripcolor``).
     """
     if renderer == "pyvista":
-        return _plot_field_pyvista(grid, t, path)
-    points, triangles = _triangles(grid)
-    xmin, ymin = points.min(axis=0)
-    xmax, ymax = points.max(axis=0)
-    # 0.6 in more than the body for the title and the tick labels (a flat body lost its title).
-    fig = Figure(figsize=(7, 7 * (ymax - ymin) / (xmax - xmin) + 0.6), layout="constrained")
-    ax = fig.subplots()
-    image = ax.tripcolor(
-        Triangulation(points[:, 0], points[:, 1], triangles),
-        np.asarray(grid.point_data["v"]),
-        shading="gouraud",
-        cmap="viridis",
-        vmin=0,
-        vmax=1,
-    )
-    fig.colorbar(image, ax=ax, label="v", shrink=0.9)
-    ax.set_xlim(xmin, xmax)
-    ax.set_ylim(ymin, ymax)
-    ax.set_aspect("equal")
-    ax.set_title(f"v at t = {t:g}")
-    fig.savefig(path, dpi=DPI)
-    return path
-
-
-def _plot_field_pyvista(grid: pyvista.UnstructuredGrid, t: float, path: Path) -> Path:
-    """Render v with VTK off-screen; the camera looks down z with parallel projection."""
-    xmin, xmax, ymin, ymax = grid.bounds[:4]
-    width, height = xmax - xmin, ymax - ymin
-    # The body fills the left BODY of the window (with a 5 % margin); the colour bar the rest.
-    body, margin = 0.82, 1.05
-    pixels_y = 1200
-    pixels_x = int(pixels_y * margin * width / height / body)
-    plotter = pyvista.Plotter(off_screen=True, window_size=(pixels_x, pixels_y))
-    try:
-        plotter.set_background("white")
-        plotter.add_mesh(
-            grid,
-            scalars="v",
-            cmap="viridis",
-            clim=(0, 1),
-            lighting=False,
-            scalar_bar_args={
-                "title": "v",
-                "vertical": True,
-                "position_x": 0.85,
-                "position_y": 0.1,
-                "width": 0.06,
-                "height": 0.8,
-                "fmt": "%.1f",
-                "n_labels": 6,
-                "title_font_size": 36,
-                "label_font_size": 28,
-                "color": "black",
-            },
-        )
-        label = (int(0.83 * pixels_x), int(0.025 * pixels_y))
-        plotter.add_text(f"t = {t:g}", position=label, font_size=14, color="black")
-        plotter.enable_parallel_projection()
-        camera = plotter.camera
-        window_width = margin * height * pixels_x / pixels_y
-        x = 0.5 * (xmin + xmax) + (0.5 - body / 2) * window_width
-        y = 0.5 * (ymin + ymax)
-        camera.focal_point = (x, y, 0.0)
-        camera.position = (x, y, 1.0)
-        camera.up = (0.0, 1.0, 0.0)
-        camera.parallel_scale = 0.5 * margin * height
-        plotter.reset_camera_clipping_range()
-        plotter.screenshot(str(path))
-    finally:
-        plotter.close()
-    return path
+        return draw_field_pyvista(grid, f"t = {t:g}", path)
+    return draw_field_matplotlib(grid, f"v at t = {t:g}", path)
 
 
 def default_zoom(

@@ -73,7 +73,8 @@ class RunResult:
     def fields(self) -> pyvista.UnstructuredGrid | None:
         """The last stored step's mesh with point data ``u`` and ``v``, its t in field data ``t``.
 
-        Read from the folder's VTK series; ``None`` if it holds no readable step.
+        Read from the folder's VTK series; ``None`` if it holds no readable step. ``u`` has one
+        value per point for the anti-plane model and two (u_x, u_y) for the plane models.
         """
         if self.folder is None:
             return None
