@@ -18,7 +18,7 @@ from ngat.state import ATState
 
 SLIT_OUTSIDE = """
     import dataclasses
-    from geometries.two_slits import scene as base
+    from ngat.geometries.two_slits import scene as base
     scene = dataclasses.replace(
         base, name="slit-outside", slits=(base.slits[0], ((10.0, 10.0), (10.0, 12.0)))
     )

@@ -39,7 +39,7 @@ STEPS = """
 
     import numpy as np
 
-    from geometries.profile_1d import scene as base
+    from ngat.geometries.profile_1d import scene as base
 
     scene = dataclasses.replace(
         base, name="profile-steps", times=np.linspace(0.0, 1.0, 40),
@@ -50,7 +50,7 @@ STEPS = """
 SCENE_CODE = {
     "geometry": """
         import dataclasses
-        from geometries.two_slits import scene as base
+        from ngat.geometries.two_slits import scene as base
 
         def geometry():
             return 1 / 0
@@ -59,7 +59,7 @@ SCENE_CODE = {
         """,
     "mesh": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
 
         def mesh(maxh):
             raise RuntimeError("no mesher today")
@@ -68,7 +68,7 @@ SCENE_CODE = {
         """,
     "load": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
 
         def pull(t):
             raise ValueError("no load today")
@@ -77,7 +77,7 @@ SCENE_CODE = {
         """,
     "crack": """
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
 
         def crack(coords):
             return coords[:, 7] > 0
@@ -336,7 +336,7 @@ def test_a_nan_load_names_its_region(tmp_path, capsys):
     path.write_text(
         textwrap.dedent("""
         import dataclasses
-        from geometries.profile_1d import scene as base
+        from ngat.geometries.profile_1d import scene as base
 
         def pull(t):
             return t * float("nan")

@@ -31,8 +31,8 @@ GATED = """
 
     import numpy as np
 
-    from geometries.profile_1d import aligned_mesh
-    from geometries.profile_1d import scene as base
+    from ngat.geometries.profile_1d import aligned_mesh
+    from ngat.geometries.profile_1d import scene as base
 
 
     def gated_mesh(maxh):

@@ -39,7 +39,7 @@ def test_incomplete_mesh_is_refused_with_a_maxh_that_works():
 
 
 def test_complete_meshes_have_no_unmeshed_edges():
-    from geometries.two_slits import geometry
+    from ngat.geometries.two_slits import geometry
 
     for maxh in (0.5, 0.25):
         mesh = generate_mesh(geometry(), maxh)

@@ -14,7 +14,7 @@ from ngat.scene import load_scene
 # profile-1d with four load times: a few cheap steps to interrupt and resume.
 SCENE = """
     import dataclasses
-    from geometries.profile_1d import scene as base
+    from ngat.geometries.profile_1d import scene as base
     scene = dataclasses.replace(base, name="profile-steps", times=[0.0, 0.1, 0.2, 0.3])
     """
 PAUSE = 0.5

@@ -18,7 +18,7 @@ from ngat.threads import FixedThreads
 SCENE = """
     import dataclasses
 
-    from geometries.two_slits import scene as base
+    from ngat.geometries.two_slits import scene as base
 
     scene = dataclasses.replace(
         base, name="two-slits-start", quick={**base.quick, "times": [0.0, 0.05]}
