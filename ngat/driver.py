@@ -159,10 +159,12 @@ def _run_locked(
     resume: bool,
 ) -> RunResult:
     """:func:`run`, with the folder locked."""
-    checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
+    checkpoint, records = (
+        prepare_resume(folder, scene.name, parameters.flat(), times) if resume else (None, [])
+    )
     timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
     writer = ResultsWriter(folder, append=checkpoint is not None)
-    result = RunResult(folder=Path(folder))
+    result = RunResult(records=records, folder=Path(folder))
     summary = result.summary
     summary.update(
         scene=scene.name,
@@ -198,7 +200,6 @@ def _run_locked(
             check_fixed_mesh(state, scene.slits, parameters.model.eps)
         if checkpoint is not None:
             restore_state(state, checkpoint)
-            result.records.extend(checkpoint.records)
         result.state = state
         band = crack_band(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
@@ -250,7 +251,7 @@ def _run_locked(
                     writer.write_step(record, mesh, {"u": state.u, "v": state.v})
                 summary["timing"] = timer.summary()
                 with timer("checkpoint"):
-                    save_checkpoint(folder, state, k, [*result.records, record], summary)
+                    save_checkpoint(folder, state, k, summary)
                 # A step counts as finished once its checkpoint is written (--resume goes on
                 # there); the records of a failed write do not hold it.
                 result.records.append(record)

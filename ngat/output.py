@@ -1,10 +1,10 @@
 """The results folder: energies.csv, fields.pvd with one VTU per step, summary.json, run.log.
 
-Every file is usable while the run goes on and after a crash: each CSV row is flushed when its
-step ends, the VTU of a step is complete before ``fields.pvd`` names it, and ``fields.pvd`` and
-``summary.json`` are replaced atomically (write a temporary file, then rename). A write that
-fails (a full disk) leaves no partial file behind — no temporary file, no half VTU, no half CSV
-row — and raises :class:`OutputError` saying how to continue.
+Every file is usable while the run goes on and after a crash: each CSV row is written and
+synced when its step ends, the VTU of a step is complete before ``fields.pvd`` names it, and
+``fields.pvd`` and ``summary.json`` are replaced atomically (write a temporary file, then
+rename). A write that fails (a full disk) leaves no partial file behind — no temporary file, no
+half VTU, no half CSV row — and raises :class:`OutputError` saying how to continue.
 """
 
 from __future__ import annotations
@@ -362,6 +362,10 @@ class ResultsWriter:
                 if new_file:
                     writer.writeheader()
                 writer.writerow(record)
+                # Synced: a checkpoint written after this row must never be ahead of the
+                # rows, not even after a power failure (--resume reads the rows back).
+                f.flush()
+                os.fsync(f.fileno())
         except BaseException:
             with contextlib.suppress(OSError):
                 if size:

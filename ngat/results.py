@@ -15,6 +15,7 @@ import functools
 import logging
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +29,15 @@ if TYPE_CHECKING:
 
     from ngat.state import ATState
 
-__all__ = ["RunResult", "load_results", "read_records", "field_series", "read_fields", "Frame"]
+__all__ = [
+    "RunResult",
+    "load_results",
+    "read_records",
+    "parse_records",
+    "field_series",
+    "read_fields",
+    "Frame",
+]
 
 log = logging.getLogger(__name__)
 
@@ -121,13 +130,26 @@ def read_records(path: Path) -> list[dict[str, Any]]:
     path
         The CSV file.
     """
-    records = []
     with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            if None in row or None in row.values():
-                log.info("%s: skipping an incomplete row %s", path, row.get("step"))
-                continue
-            records.append({name: _value(text) for name, text in row.items()})
+        return parse_records(f, path)
+
+
+def parse_records(lines: Iterable[str], path: Path) -> list[dict[str, Any]]:
+    """Return the records of the lines of an ``energies.csv`` (see :func:`read_records`).
+
+    Parameters
+    ----------
+    lines
+        The file's lines, header first, with their line ends.
+    path
+        The file (named in the log when a row is dropped).
+    """
+    records = []
+    for row in csv.DictReader(lines):
+        if None in row or None in row.values():
+            log.info("%s: skipping an incomplete row %s", path, row.get("step"))
+            continue
+        records.append({name: _value(text) for name, text in row.items()})
     return records
 
 
