@@ -36,7 +36,7 @@ from ngat.crack import check_slits, connects, crack_tips
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
-from ngat.output import OutputError, ResultsWriter
+from ngat.output import OutputError, ResultsWriter, vtu_name
 from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
@@ -163,7 +163,8 @@ def _run_locked(
         prepare_resume(folder, scene.name, parameters.flat(), times) if resume else (None, [])
     )
     timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
-    writer = ResultsWriter(folder, append=checkpoint is not None)
+    stored = [(r["t"], vtu_name(r["step"])) for r in records]
+    writer = ResultsWriter(folder, append=checkpoint is not None, stored=stored)
     result = RunResult(records=records, folder=Path(folder))
     summary = result.summary
     summary.update(

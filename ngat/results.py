@@ -167,9 +167,9 @@ def _value(text: str) -> Any:
 def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) -> list[Frame]:
     """Return the stored steps whose VTU exists, in load order.
 
-    ``fields.pvd`` gives the load times; without it the VTUs are found by name
-    (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the step number
-    stands in for t when there is no such row).
+    ``fields.pvd`` gives the load times; without it (or if it does not parse) the VTUs are
+    found by name (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the
+    step number stands in for t when there is no such row).
 
     Parameters
     ----------
@@ -181,8 +181,15 @@ def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) ->
     folder = Path(folder)
     frames = []
     pvd = folder / "fields.pvd"
-    if pvd.exists():
-        for dataset in ET.parse(pvd).getroot().iter("DataSet"):
+    try:
+        datasets = list(ET.parse(pvd).getroot().iter("DataSet"))
+    except FileNotFoundError:
+        datasets = None
+    except ET.ParseError as error:
+        log.info("%s: unreadable (%s); the VTU files are found by name", pvd, error)
+        datasets = None
+    if datasets is not None:
+        for dataset in datasets:
             path = folder / dataset.get("file")
             frames.append(Frame(_step_of(path), float(dataset.get("timestep")), path))
     else:
