@@ -2,7 +2,9 @@
 
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
-forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
+forces, mesh measures and timings go to ``energies.csv``, the fields (every ``output_every``-th
+step and the last) to ``fields.pvd``, and the state to the checkpoint; what a step writes does
+not grow with the steps before it.
 A run holds its folder's lock throughout (:mod:`ngat.lock`), and however it ends its
 ``summary.json`` records how: ``completed``, ``interrupted`` (KeyboardInterrupt: SIGINT, or
 SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too full even for that.
@@ -163,7 +165,12 @@ def _run_locked(
         prepare_resume(folder, scene.name, parameters.flat(), times) if resume else (None, [])
     )
     timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
-    stored = [(r["t"], vtu_name(r["step"])) for r in records]
+    output = parameters.output
+    stored = [
+        (r["t"], vtu_name(r["step"]))
+        for r in records
+        if output.writes_fields(r["step"], len(times))
+    ]
     writer = ResultsWriter(folder, append=checkpoint is not None, stored=stored)
     result = RunResult(records=records, folder=Path(folder))
     summary = result.summary
@@ -247,9 +254,10 @@ def _run_locked(
             record["warnings"] = " ".join(problems)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
+            fields = {"u": state.u, "v": state.v} if output.writes_fields(k, len(times)) else None
             with signals_held():
                 with timer("output"):
-                    writer.write_step(record, mesh, {"u": state.u, "v": state.v})
+                    writer.write_step(record, mesh, fields)
                 summary["timing"] = timer.summary()
                 with timer("checkpoint"):
                     save_checkpoint(folder, state, k, summary)
