@@ -9,9 +9,9 @@ Scene: the two-slits geometry on its coarse initial mesh (``maxh=0.5``, ``eps=0.
 ``adapt=fixed``, ``resolve_eps=false``: deliberately under-resolved, the mesh never changes)
 with 10^6 load times in [0, 1], so that the first steps stay elastic and cost the same
 computation. The run stops after ``--steps`` steps. Steps per second are taken from the time
-between the ends of the steps, over 21-step windows around step 100 and the last window.
+between the ends of the steps, over 101-step windows around step 100 and at the end.
 
-Run ``python scripts/bench_steps.py`` (800 steps) or ``--quick`` (120 steps); output in
+Run ``python scripts/bench_steps.py`` (800 steps) or ``--quick`` (160 steps); output in
 ``--out`` (default ``results/bench_steps``): ``bench.json``.
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 from ngat.driver import run
 from ngat.scene import load_scene
 
-WINDOW = 21
+WINDOW = 101
 """Steps per measuring window."""
 
 
@@ -45,12 +45,12 @@ def steps_per_second(ends: list[float], centre: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="120 steps instead of 800")
+    parser.add_argument("--quick", action="store_true", help="160 steps instead of 800")
     parser.add_argument("--steps", type=int, default=800, help="load steps to run")
     parser.add_argument("--set", nargs="*", default=[], help="parameter changes, NAME=VALUE")
     parser.add_argument("--out", type=Path, default=Path("results/bench_steps"))
     args = parser.parse_args()
-    steps = 120 if args.quick else args.steps
+    steps = 160 if args.quick else args.steps
     scene = dataclasses.replace(load_scene("two-slits"), times=np.linspace(0.0, 1.0, 10**6))
     changes = {"maxh": 0.5, "eps": 0.2, "adapt": "fixed", "resolve_eps": False}
     changes.update(item.split("=", 1) for item in args.set)
