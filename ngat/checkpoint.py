@@ -2,10 +2,13 @@
 
 A checkpoint is one file, ``checkpoint.npz`` in the results folder, written to a temporary file
 and renamed over the old one, so a run killed at any moment leaves either the previous or the new
-checkpoint, complete. It holds the last finished step, the records (rows of ``energies.csv``)
-and summary entries so far, the nodal values of u, v and the previous step's v (which defines
-CR), the lagged Cholesky factorisations' matrix values (they outlive a load step, see
-:meth:`ngat.state.ATState.solver_state`) and the mesh.
+checkpoint, complete. It holds the state after the last finished step, and nothing that grows
+with the number of steps: the step, the summary entries a resumed run carries on
+(:data:`CARRIED`), the nodal values of u, v and the previous step's v (which defines CR), the
+lagged Cholesky factorisations' matrix values (they outlive a load step, see
+:meth:`ngat.state.ATState.solver_state`) and the mesh. The records of the finished steps are the
+rows of ``energies.csv``, written (and synced) before the checkpoint: a resumed run reads them
+back from there (:func:`restore_energies`).
 
 The mesh is stored as the list of its refinements — the marked elements of every
 ``mesh.Refine()`` — plus its vertex coordinates as a check. A resumed run meshes the scene again
@@ -18,8 +21,6 @@ coordinates check.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import logging
 from collections.abc import Sequence
@@ -39,6 +40,7 @@ from ngat.output import (
     write_atomic,
     writing,
 )
+from ngat.results import parse_records
 from ngat.state import ATState
 
 __all__ = [
@@ -52,9 +54,17 @@ __all__ = [
     "restore_state",
     "restore_energies",
     "CHECKPOINT",
+    "CARRIED",
 ]
 
 log = logging.getLogger(__name__)
+
+CARRIED = ("timing", "fracture_time", "refinement_history", "resumed_after_step")
+"""The summary entries gathered during the steps that the checkpoint keeps for a resumed run.
+
+The refinement history has one entry per mesh refinement, as the refinement list of the mesh
+itself: on a fixed mesh it does not grow.
+"""
 
 
 @dataclass
@@ -67,10 +77,8 @@ class Checkpoint:
         Index of the last finished load step.
     identity
         ``scene``, ``parameters`` and ``times`` of the run, as in ``summary.json``.
-    records
-        One dictionary per finished step (the rows of ``energies.csv``).
     summary
-        Summary entries gathered during the steps (refinement history, fracture time, ...).
+        The summary entries of :data:`CARRIED` the run has.
     fields
         ``u``, ``v``, ``v_prev``: nodal values.
     refinements
@@ -83,7 +91,6 @@ class Checkpoint:
 
     step: int
     identity: dict[str, Any]
-    records: list[dict[str, Any]]
     summary: dict[str, Any]
     fields: dict[str, np.ndarray]
     refinements: list[np.ndarray]
@@ -102,7 +109,6 @@ def save_checkpoint(
     folder: Path,
     state: ATState,
     step: int,
-    records: Sequence[dict[str, Any]],
     summary: dict[str, Any],
 ) -> None:
     """Write ``folder/checkpoint.npz`` atomically (:func:`ngat.output.atomic_file`).
@@ -114,11 +120,10 @@ def save_checkpoint(
     state
         Fields, mesh, refinement list and solvers after the step.
     step
-        Index of the step just finished.
-    records
-        The records of steps 0, …, ``step``.
+        Index of the step just finished (its row is already in ``energies.csv``).
     summary
-        The run's summary so far (its ``scene``, ``parameters`` and ``times`` identify the run).
+        The run's summary so far (its ``scene``, ``parameters`` and ``times`` identify the run;
+        the entries of :data:`CARRIED` are kept).
 
     Raises
     ------
@@ -126,11 +131,10 @@ def save_checkpoint(
         If the write fails (:func:`ngat.output.writing`); the previous checkpoint is then kept.
     """
     meta = {
-        "version": 1,
+        "version": 2,
         "step": int(step),
         "identity": {key: summary[key] for key in ("scene", "parameters", "times")},
-        "records": list(records),
-        "summary": summary,
+        "summary": {key: summary[key] for key in CARRIED if key in summary},
     }
     marks = state.refinements
     arrays = {
@@ -174,8 +178,7 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
             return Checkpoint(
                 step=meta["step"],
                 identity=meta["identity"],
-                records=meta["records"],
-                summary=meta["summary"],
+                summary={key: meta["summary"][key] for key in CARRIED if key in meta["summary"]},
                 fields={key: data[key] for key in ("u", "v", "v_prev")},
                 refinements=[marks[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)],
                 coords=data["coords"],
@@ -223,7 +226,7 @@ def check_identity(
 
 def prepare_resume(
     folder: Path, scene: str, parameters: dict[str, Any], times: Sequence[float]
-) -> Checkpoint | None:
+) -> tuple[Checkpoint | None, list[dict[str, Any]]]:
     """Check that ``folder`` holds this run; cut ``energies.csv`` back to its checkpoint.
 
     Parameters
@@ -235,21 +238,25 @@ def prepare_resume(
 
     Returns
     -------
-    Checkpoint or None
+    checkpoint : Checkpoint or None
         The checkpoint; ``None`` if the run was interrupted before its first step ended.
+    records : list of dict
+        The records of the steps the checkpoint finished (:func:`restore_energies`).
 
     Raises
     ------
     OutputError
-        If the folder holds no run, or one of another scene, parameters or times.
+        If the folder holds no run, one of another scene, parameters or times, or fewer rows
+        than its checkpoint finished steps.
     """
     check_results_folder(folder, scene, parameters, times, mode="resume")
     checkpoint = load_checkpoint(folder)
-    if checkpoint is not None:
-        check_identity(checkpoint, scene, parameters, times)
-        restore_energies(folder, checkpoint.records)
-        log.info("resuming %s after step %d", folder, checkpoint.step)
-    return checkpoint
+    if checkpoint is None:
+        return None, []
+    check_identity(checkpoint, scene, parameters, times)
+    records = restore_energies(folder, checkpoint.step)
+    log.info("resuming %s after step %d", folder, checkpoint.step)
+    return checkpoint, records
 
 
 def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
@@ -282,22 +289,34 @@ def restore_state(state: ATState, checkpoint: Checkpoint) -> None:
     state.restore_solver_state(checkpoint.solvers)
 
 
-def restore_energies(folder: Path, records: Sequence[dict[str, Any]]) -> None:
-    """Rewrite ``energies.csv`` with the checkpoint's rows (drops a half-written last row).
+def restore_energies(folder: Path, step: int) -> list[dict[str, Any]]:
+    """Cut ``energies.csv`` back to the rows of steps 0, …, ``step``; return their records.
+
+    A run writes a step's row before its checkpoint, so the file may hold one row more (whole
+    or cut short by a crash), which is dropped; the rows kept are the file's own bytes.
 
     Raises
     ------
     OutputError
-        If the write fails (:func:`ngat.output.writing`).
+        If the file lacks rows of the checkpoint's steps (it was deleted or changed), or the
+        write fails (:func:`ngat.output.writing`).
     """
     path = Path(folder) / "energies.csv"
-    if not records:
-        path.unlink(missing_ok=True)
-        return
-    # The columns are the keys of the first record, as ResultsWriter fixes them.
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(records[0]), extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(records)
-    with writing(folder):
-        write_atomic(path, text.getvalue())
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        data = b""
+    lines = data.splitlines(keepends=True)
+    kept = b"".join(lines[: step + 2])
+    text = kept.decode(errors="replace")
+    records = parse_records(text.splitlines(keepends=True), path)
+    if [r.get("step") for r in records] != list(range(step + 1)) or not kept.endswith(b"\n"):
+        raise OutputError(
+            f"cannot resume '{folder}': its energies.csv lacks rows of the {step + 1} steps its "
+            f"checkpoint finished (was it deleted or changed?); start afresh with --out {folder} "
+            "--overwrite"
+        )
+    if kept != data:
+        with writing(folder):
+            write_atomic(path, text)
+    return records

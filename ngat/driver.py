@@ -2,7 +2,9 @@
 
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
-forces, mesh measures and timings go to ``energies.csv`` and the fields to ``fields.pvd``.
+forces, mesh measures and timings go to ``energies.csv``, the fields (every ``output_every``-th
+step and the last) to ``fields.pvd``, and the state to the checkpoint; what a step writes does
+not grow with the steps before it.
 A run holds its folder's lock throughout (:mod:`ngat.lock`), and however it ends its
 ``summary.json`` records how: ``completed``, ``interrupted`` (KeyboardInterrupt: SIGINT, or
 SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too full even for that.
@@ -36,7 +38,7 @@ from ngat.crack import check_slits, connects, crack_tips
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
-from ngat.output import OutputError, ResultsWriter
+from ngat.output import OutputError, ResultsWriter, vtu_name
 from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
@@ -159,10 +161,18 @@ def _run_locked(
     resume: bool,
 ) -> RunResult:
     """:func:`run`, with the folder locked."""
-    checkpoint = prepare_resume(folder, scene.name, parameters.flat(), times) if resume else None
+    checkpoint, records = (
+        prepare_resume(folder, scene.name, parameters.flat(), times) if resume else (None, [])
+    )
     timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
-    writer = ResultsWriter(folder, append=checkpoint is not None)
-    result = RunResult(folder=Path(folder))
+    output = parameters.output
+    stored = [
+        (r["t"], vtu_name(r["step"]))
+        for r in records
+        if output.writes_fields(r["step"], len(times))
+    ]
+    writer = ResultsWriter(folder, append=checkpoint is not None, stored=stored)
+    result = RunResult(records=records, folder=Path(folder))
     summary = result.summary
     summary.update(
         scene=scene.name,
@@ -198,7 +208,6 @@ def _run_locked(
             check_fixed_mesh(state, scene.slits, parameters.model.eps)
         if checkpoint is not None:
             restore_state(state, checkpoint)
-            result.records.extend(checkpoint.records)
         result.state = state
         band = crack_band(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
@@ -245,12 +254,13 @@ def _run_locked(
             record["warnings"] = " ".join(problems)
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
+            fields = {"u": state.u, "v": state.v} if output.writes_fields(k, len(times)) else None
             with signals_held():
                 with timer("output"):
-                    writer.write_step(record, mesh, {"u": state.u, "v": state.v})
+                    writer.write_step(record, mesh, fields)
                 summary["timing"] = timer.summary()
                 with timer("checkpoint"):
-                    save_checkpoint(folder, state, k, [*result.records, record], summary)
+                    save_checkpoint(folder, state, k, summary)
                 # A step counts as finished once its checkpoint is written (--resume goes on
                 # there); the records of a failed write do not hold it.
                 result.records.append(record)

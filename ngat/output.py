@@ -1,10 +1,13 @@
 """The results folder: energies.csv, fields.pvd with one VTU per step, summary.json, run.log.
 
-Every file is usable while the run goes on and after a crash: each CSV row is flushed when its
-step ends, the VTU of a step is complete before ``fields.pvd`` names it, and ``fields.pvd`` and
-``summary.json`` are replaced atomically (write a temporary file, then rename). A write that
-fails (a full disk) leaves no partial file behind — no temporary file, no half VTU, no half CSV
-row — and raises :class:`OutputError` saying how to continue.
+Every file is usable while the run goes on and after a crash: each CSV row is written and
+synced when its step ends, the VTU of a step is complete before ``fields.pvd`` names it, and
+``summary.json`` is replaced atomically (write a temporary file, then rename). A step costs the
+same however many came before it: the row is appended, and the step's entry is written over the
+closing tags of ``fields.pvd`` together with new closing tags (one write of a few hundred
+bytes), so that the collection is valid XML after every step. A write that fails (a full disk)
+leaves no partial file behind — no temporary file, no half VTU, no half CSV row, no half entry —
+and raises :class:`OutputError` saying how to continue.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import ngsolve
 
 __all__ = [
     "ResultsWriter",
+    "vtu_name",
     "atomic_file",
     "write_atomic",
     "writing",
@@ -245,6 +249,62 @@ class _RunLog(logging.FileHandler):
             super().handleError(record)
 
 
+def vtu_name(step: int) -> str:
+    """Return the VTU file of load step ``step``, relative to the results folder."""
+    return f"fields/step_{step:04d}.vtu"
+
+
+PVD_HEAD = b'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+PVD_TAIL = b"  </Collection>\n</VTKFile>\n"
+"""The bytes of ``fields.pvd`` before and after its entries."""
+
+
+def _dataset(t: float, file: str) -> bytes:
+    """Return the ``fields.pvd`` entry of the VTU ``file`` at load time ``t``."""
+    return f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(file)}/>\n'.encode()
+
+
+class _Series:
+    """``fields.pvd``, the collection of the VTU files, valid XML after every entry.
+
+    The first entry of a run (or of a resumed run) writes the file whole and atomically, with
+    the entries of the steps before; each further entry is written, followed by the closing
+    tags, over the old closing tags in one ``pwrite`` of a few hundred bytes. A write that
+    fails puts the closing tags back; a run killed at any moment leaves the file with or
+    without its last entry.
+    """
+
+    def __init__(self, path: Path, stored: Sequence[tuple[float, str]]):
+        self.path = path
+        self.stored = list(stored)
+        self.end: int | None = None  # offset of the closing tags, once written
+
+    def append(self, t: float, file: str) -> None:
+        """Add the VTU ``file`` at load time ``t``; raise :class:`OSError` if that fails."""
+        entry = _dataset(t, file)
+        if self.end is None:
+            head = PVD_HEAD + b"".join(_dataset(*item) for item in self.stored)
+            with atomic_file(self.path) as f:
+                f.write(head + entry + PVD_TAIL)
+            self.stored.clear()
+            self.end = len(head) + len(entry)
+            return
+        fd = os.open(self.path, os.O_WRONLY)
+        try:
+            data = entry + PVD_TAIL
+            if os.pwrite(fd, data, self.end) != len(data):
+                raise OSError(errno.ENOSPC, f"{self.path.name}: {os.strerror(errno.ENOSPC)}")
+        except BaseException:
+            # The old closing tags' bytes are allocated: writing them back needs no space.
+            with contextlib.suppress(OSError):
+                os.pwrite(fd, PVD_TAIL, self.end)
+                os.ftruncate(fd, self.end + len(PVD_TAIL))
+            raise
+        finally:
+            os.close(fd)
+        self.end += len(entry)
+
+
 class ResultsWriter:
     """Write one run's results folder step by step.
 
@@ -258,9 +318,13 @@ class ResultsWriter:
         Results folder; created if missing.
     append
         Keep the rows and fields already written (resuming a run).
+    stored
+        When appending: load time and VTU file of every step whose fields were written.
     """
 
-    def __init__(self, folder: Path, append: bool = False):
+    def __init__(
+        self, folder: Path, append: bool = False, stored: Sequence[tuple[float, str]] = ()
+    ):
         self.folder = Path(folder)
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
@@ -279,17 +343,13 @@ class ResultsWriter:
                 "choose another with --out"
             ) from None
         self.csv_path = self.folder / "energies.csv"
-        self.pvd_entries: list[tuple[float, str]] = []
         self.columns: list[str] | None = None
         if append and self.csv_path.exists():
-            with open(self.csv_path) as f:
-                reader = csv.DictReader(f)
-                self.columns = reader.fieldnames
-                self.pvd_entries = [
-                    (float(row["t"]), f"fields/step_{int(row['step']):04d}.vtu") for row in reader
-                ]
+            with open(self.csv_path, newline="") as f:
+                self.columns = next(csv.reader(f), None)
         elif self.csv_path.exists():
             self.csv_path.unlink()
+        self.series = _Series(self.folder / "fields.pvd", stored)
         self.log_handler = _RunLog(self.folder / "run.log", "a" if append else "w")
         self.log_handler.setFormatter(
             logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -300,8 +360,10 @@ class ResultsWriter:
         if logger.getEffectiveLevel() > logging.INFO:
             logger.setLevel(logging.INFO)
 
-    def write_step(self, record: dict[str, Any], mesh: ngsolve.Mesh, fields: dict) -> None:
-        """Append one row to ``energies.csv`` and write the step's VTU.
+    def write_step(
+        self, record: dict[str, Any], mesh: ngsolve.Mesh, fields: dict | None = None
+    ) -> None:
+        """Append one row to ``energies.csv``; write the step's VTU and add it to ``fields.pvd``.
 
         Parameters
         ----------
@@ -310,37 +372,30 @@ class ResultsWriter:
         mesh
             Current mesh.
         fields
-            Name → GridFunction written to the VTU (u and v).
+            Name → GridFunction written to the VTU (u and v); ``None``: no VTU for this step
+            (``output_every``).
 
         Raises
         ------
         OutputError
             If a write fails (see :func:`writing`); the step's VTU and row are then not kept.
         """
-        name = f"fields/step_{int(record['step']):04d}"
         with writing(self.folder):
-            self._write_vtu(name, mesh, fields)
-            self.pvd_entries.append((float(record["t"]), f"{name}.vtu"))
-            datasets = "\n".join(
-                f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
-                for t, f in self.pvd_entries
-            )
-            write_atomic(
-                self.folder / "fields.pvd",
-                '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
-                f"  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n",
-            )
+            if fields is not None:
+                name = vtu_name(int(record["step"]))
+                self._write_vtu(name, mesh, fields)
+                self.series.append(float(record["t"]), name)
             self._append_row(record)
 
     def _write_vtu(self, name: str, mesh: ngsolve.Mesh, fields: dict) -> None:
-        """Write ``name.vtu``; raise :class:`OSError` and remove it unless it is complete."""
-        path = self.folder / f"{name}.vtu"
+        """Write the VTU ``name``; raise :class:`OSError` and remove it unless it is complete."""
+        path = self.folder / name
         try:
             ngsolve.VTKOutput(
                 ma=mesh,
                 coefs=list(fields.values()),
                 names=list(fields),
-                filename=str(self.folder / name),
+                filename=str(path.with_suffix("")),
                 subdivision=0,
             ).Do()
             # NGSolve does not report a failed write (it truncates the file on a full disk).
@@ -362,6 +417,10 @@ class ResultsWriter:
                 if new_file:
                     writer.writeheader()
                 writer.writerow(record)
+                # Synced: a checkpoint written after this row must never be ahead of the
+                # rows, not even after a power failure (--resume reads the rows back).
+                f.flush()
+                os.fsync(f.fileno())
         except BaseException:
             with contextlib.suppress(OSError):
                 if size:

@@ -1,4 +1,4 @@
-"""Run configuration: model, solver and adaptivity parameters as frozen dataclasses.
+"""Run configuration: model, solver, adaptivity and output parameters as frozen dataclasses.
 
 Every parameter has a default (the paper's computational example where it gives one); a scene
 states only what differs. Names are unique across the three groups so that ``--set eps=0.025``
@@ -17,6 +17,7 @@ __all__ = [
     "ModelParameters",
     "SolverParameters",
     "AdaptivityParameters",
+    "OutputParameters",
     "Parameters",
     "ParameterError",
 ]
@@ -311,12 +312,39 @@ class AdaptivityParameters:
 
 
 @dataclass(frozen=True)
+class OutputParameters:
+    """What a run writes to its results folder (:class:`ngat.output.ResultsWriter`).
+
+    Attributes
+    ----------
+    output_every
+        Write the fields (a VTU in ``fields.pvd``) of every ``output_every``-th load step
+        (steps 0, k, 2k, …) and of the last one; ``energies.csv`` gets every step.
+    """
+
+    output_every: int = 1
+
+    def check(self) -> None:
+        """Raise :class:`ParameterError` naming the first invalid value."""
+        if not self.output_every >= 1:
+            raise ParameterError(
+                f"output_every must be >= 1, got output_every={self.output_every}: "
+                "1 writes the fields of every step"
+            )
+
+    def writes_fields(self, step: int, steps: int) -> bool:
+        """Return whether load step ``step`` of ``steps`` writes its fields."""
+        return step % self.output_every == 0 or step == steps - 1
+
+
+@dataclass(frozen=True)
 class Parameters:
     """All parameters of a run, grouped; :meth:`replace` addresses them by bare name."""
 
     model: ModelParameters = field(default_factory=ModelParameters)
     solver: SolverParameters = field(default_factory=SolverParameters)
     adaptivity: AdaptivityParameters = field(default_factory=AdaptivityParameters)
+    output: OutputParameters = field(default_factory=OutputParameters)
 
     def _groups(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

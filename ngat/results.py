@@ -15,6 +15,7 @@ import functools
 import logging
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +29,15 @@ if TYPE_CHECKING:
 
     from ngat.state import ATState
 
-__all__ = ["RunResult", "load_results", "read_records", "field_series", "read_fields", "Frame"]
+__all__ = [
+    "RunResult",
+    "load_results",
+    "read_records",
+    "parse_records",
+    "field_series",
+    "read_fields",
+    "Frame",
+]
 
 log = logging.getLogger(__name__)
 
@@ -122,13 +131,26 @@ def read_records(path: Path) -> list[dict[str, Any]]:
     path
         The CSV file.
     """
-    records = []
     with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            if None in row or None in row.values():
-                log.info("%s: skipping an incomplete row %s", path, row.get("step"))
-                continue
-            records.append({name: _value(text) for name, text in row.items()})
+        return parse_records(f, path)
+
+
+def parse_records(lines: Iterable[str], path: Path) -> list[dict[str, Any]]:
+    """Return the records of the lines of an ``energies.csv`` (see :func:`read_records`).
+
+    Parameters
+    ----------
+    lines
+        The file's lines, header first, with their line ends.
+    path
+        The file (named in the log when a row is dropped).
+    """
+    records = []
+    for row in csv.DictReader(lines):
+        if None in row or None in row.values():
+            log.info("%s: skipping an incomplete row %s", path, row.get("step"))
+            continue
+        records.append({name: _value(text) for name, text in row.items()})
     return records
 
 
@@ -146,9 +168,9 @@ def _value(text: str) -> Any:
 def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) -> list[Frame]:
     """Return the stored steps whose VTU exists, in load order.
 
-    ``fields.pvd`` gives the load times; without it the VTUs are found by name
-    (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the step number
-    stands in for t when there is no such row).
+    ``fields.pvd`` gives the load times; without it (or if it does not parse) the VTUs are
+    found by name (``fields/step_XXXX.vtu``) and their times looked up in ``energies`` (the
+    step number stands in for t when there is no such row).
 
     Parameters
     ----------
@@ -160,8 +182,15 @@ def field_series(folder: Path, energies: dict[str, np.ndarray] | None = None) ->
     folder = Path(folder)
     frames = []
     pvd = folder / "fields.pvd"
-    if pvd.exists():
-        for dataset in ET.parse(pvd).getroot().iter("DataSet"):
+    try:
+        datasets = list(ET.parse(pvd).getroot().iter("DataSet"))
+    except FileNotFoundError:
+        datasets = None
+    except ET.ParseError as error:
+        log.info("%s: unreadable (%s); the VTU files are found by name", pvd, error)
+        datasets = None
+    if datasets is not None:
+        for dataset in datasets:
             path = folder / dataset.get("file")
             frames.append(Frame(_step_of(path), float(dataset.get("timestep")), path))
     else:

@@ -1,6 +1,7 @@
 """Scripts run in quick mode and write their outputs."""
 
 import csv
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -36,3 +37,20 @@ def test_stability_cell_with_a_refused_setting_reports_the_error(tmp_path):
     )  # fmt: skip
     (row,) = csv.DictReader(open(tmp_path / "stability.csv"))
     assert row["status"].startswith("failed: ParameterError: nonlinear=newton needs lumping=true")
+
+
+def test_bench_steps_quick(tmp_path):
+    subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "bench_steps.py"),
+            "--quick",
+            "--out",
+            str(tmp_path),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    bench = json.loads((tmp_path / "bench.json").read_text())
+    assert bench["steps"] == 160 and bench["steps_per_s_at_100"] > 0
+    assert bench["checkpoint_bytes"] < 100_000  # the state of a 348-element mesh, no records
