@@ -59,11 +59,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-CARRIED = ("timing", "fracture_time", "refinement_history", "resumed_after_step")
+CARRIED = ("timing", "fracture_time", "refinement_history", "resumed_after_step", "diagnostics")
 """The summary entries gathered during the steps that the checkpoint keeps for a resumed run.
 
 The refinement history has one entry per mesh refinement, as the refinement list of the mesh
-itself: on a fixed mesh it does not grow.
+itself: on a fixed mesh it does not grow. The diagnostics have one entry per problem found
+(a step and kind each), which a healthy run does not have.
 """
 
 

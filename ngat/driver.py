@@ -259,6 +259,7 @@ def _run_locked(
                 with timer("output"):
                     writer.write_step(record, mesh, fields)
                 summary["timing"] = timer.summary()
+                summary["diagnostics"] = diagnostics.summary()
                 with timer("checkpoint"):
                     save_checkpoint(folder, state, k, summary)
                 # A step counts as finished once its checkpoint is written (--resume goes on

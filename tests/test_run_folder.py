@@ -1,5 +1,6 @@
 """The results folder across restarts: a fresh run.log with --overwrite, the wall time of a
-resumed run, and a resume that works after summary.json was deleted."""
+resumed run, a resume that works after summary.json was deleted, and the diagnostics of the
+interrupted part."""
 
 import json
 import textwrap
@@ -64,3 +65,21 @@ def test_resume_without_summary_counts_the_whole_wall_time(tmp_path, capsys):
     assert wall > resumed_part
     phases = sum(v for k, v in summary["timing"].items() if k != "wall")
     assert phases == pytest.approx(wall, abs=1e-3)
+
+
+def test_resumed_run_keeps_the_diagnostics_of_the_interrupted_part(tiny_run, tmp_path):
+    # The tiny run is under-resolved on purpose: eps-under-resolved at steps 2, 3 and 4.
+    import ngat
+
+    scene, parameters = tiny_run
+    whole = ngat.run(scene, out=tmp_path / "whole", plots=False, **parameters).summary
+
+    def stop_after_step_3(record):
+        if record["step"] == 3:
+            raise Stop
+
+    with pytest.raises(Stop):
+        ngat.run(scene, out=tmp_path / "cut", plots=False, on_step=stop_after_step_3, **parameters)
+    resumed = ngat.run(scene, out=tmp_path / "cut", resume=True, plots=False, **parameters)
+    assert [d["step"] for d in whole["diagnostics"]] == [2, 3, 4]
+    assert resumed.summary["diagnostics"] == whole["diagnostics"]
