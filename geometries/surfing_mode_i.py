@@ -17,27 +17,26 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from ngsolve import CF, IfPos, Parameter, atan2, cos, pi, sin, sqrt, x, y
 
 from ngat.elasticity import lame
-from ngat.geometries.surfing import CRACK_LENGTH, SLITS, geometry
+from ngat.geometries.surfing import (
+    AMPLITUDE,
+    CRACK_LENGTH,
+    EPS,
+    RAMP,
+    SLITS,
+    SPEED,
+    TIMES,
+    geometry,
+)
 from ngat.scene import Scene
 
 YOUNG = 1.0
 """E of the scene."""
 POISSON = 0.3
 """ν of the scene."""
-EPS = 0.01
-"""ε of the scene."""
-AMPLITUDE = 1.1
-"""A = sqrt(G) of the default run: G = 1.21 ≈ 1.1 G_eff of the default crack band."""
-SPEED = 0.2
-"""V: speed of the imposed tip."""
-RAMP = 0.25
-"""Time over which the amplitude is ramped in."""
-TIMES = np.round(0.025 * np.arange(61), 10)
-"""Load times of the default run: t ∈ [0, 1.5]."""
+# ε, A = sqrt(G), V, the ramp and the load times are those of ``surfing``.
 
 
 def stress_intensity(amplitude, young: float = YOUNG, poisson: float = POISSON):
