@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from ngat.crack_density import CrackDensity
 from ngat.elasticity import AntiPlane, Elasticity
 from ngat.forms import MeshArrays
 
@@ -244,7 +245,7 @@ def nu_estimator(
     edges: EdgeTopology,
     u: np.ndarray,
     v: np.ndarray,
-    eps: float,
+    surface: CrackDensity,
     crack: np.ndarray,
     elasticity: Elasticity | None = None,
     gc: float = 1.0,
@@ -257,7 +258,14 @@ def nu_estimator(
                         + h_T² ‖(α + |∇u|²)v − α‖²_{L2(T)} + ε² h_T ‖[∂_n v]‖²_{L2(∂T∖CR)},
 
     the residual of b_j(u; v, ψ) = 0, divided by G_c. For the plane models |∇u|² becomes
-    W(u)/G_c, the energy density of :mod:`ngat.elasticity` (the v-equation only sees W).
+    W(u)/G_c, the energy density of :mod:`ngat.elasticity` (the v-equation only sees W). For
+    the AT1 crack density (:mod:`ngat.crack_density`) α becomes its q (0) in the reaction and
+    its f (3/(16ε)) in the source, and ε its d (3ε/8).
+
+    Where v = 1 the bound v ≤ 1 may hold v (always in AT1's elastic phase): there the
+    residual's negative part, which would push v above 1, is the bound's multiplier, not an
+    error. The element residual takes, at a vertex with v ≥ 1, only its positive part (for AT2
+    the residual there is W/G_c ≥ 0, so the paper's estimator is unchanged).
     v is continuous, so the jump of ∇v across an edge is
     its normal part, [∂_n v]; on boundary edges (the whole outer boundary, Ω_D included, since
     v is free there, and both faces of each slit) the flux ∂_n v itself is used. Every
@@ -275,8 +283,8 @@ def nu_estimator(
         Edge topology of the same mesh.
     u, v
         DOF values of the displacement u and nodal values of the phase field v.
-    eps
-        Regularisation length ε.
+    surface
+        Crack density γ (AT2: α = 1/(4ε) and ε, the paper's).
     crack
         Boolean vertex mask of CR(t_k), where v = 0 is imposed.
     elasticity
@@ -289,14 +297,15 @@ def nu_estimator(
     numpy.ndarray
         ν_j(u, v; T)², shape (ne,); ν_j(u, v) is the square root of the sum.
     """
-    alpha = 1 / (4 * eps)
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
     grad_v = arrays.gradient(v)
-    reaction = alpha + (elasticity or AntiPlane()).density(arrays, u) / gc
+    reaction = surface.reaction + (elasticity or AntiPlane()).density(arrays, u) / gc
     indicators = h2 * h2 * np.einsum("ek,ek->e", grad_v, grad_v) * reaction * reaction * area
-    residual = reaction[:, None] * v[arrays.elements] - alpha
+    local = v[arrays.elements]
+    residual = reaction[:, None] * local - surface.source
+    residual = np.where(local >= 1, np.maximum(residual, 0.0), residual)
     indicators += h2 * _linear_square_integral(arrays, residual)
-    per_edge = eps**2 * edges.length * edges.normal_flux_jump(v) ** 2
+    per_edge = surface.diffusion**2 * edges.length * edges.normal_flux_jump(v) ** 2
     per_edge[crack[edges.vertices].all(axis=1)] = 0.0
     indicators += h * edges.element_sum(per_edge)
     indicators[meets(arrays, crack)] = 0.0

@@ -24,6 +24,8 @@ import numpy as np
 from ngsolve import TRIG, BilinearForm, IntegrationRule, dx, grad
 from scipy.sparse import csr_matrix
 
+from ngat.crack_density import CrackDensity
+
 __all__ = [
     "vertex_rule",
     "element_diameters",
@@ -77,13 +79,19 @@ def a_form(fes: ngsolve.FESpace, v, eta: float, lumped: bool = True, bilinear=No
 
 
 def b_form(
-    fes: ngsolve.FESpace, u, eps: float, lumped: bool = True, bilinear=None, gc: float = 1.0
+    fes: ngsolve.FESpace,
+    u,
+    surface: CrackDensity,
+    lumped: bool = True,
+    bilinear=None,
+    gc: float = 1.0,
 ) -> BilinearForm:
     """Return b_j(u; v, ψ) without its constant part: ∫ P_j(vψ)(|∇u|² + α) + ε ∇v·∇ψ.
 
     The remaining term of Definition 2, ``-α ∫ P_j(ψ)``, is the right-hand side of the v-step
     (for P1 test functions ∫ P_j(ψ) = ∫ ψ, so it is the same without lumping). The form is
-    that of I_j divided by G_c: |∇u|² becomes W(u)/G_c.
+    that of I_j divided by G_c: |∇u|² becomes W(u)/G_c. With the crack density γ of
+    :mod:`ngat.crack_density`, α becomes its q and ε its d (AT2: the paper's α and ε).
 
     Parameters
     ----------
@@ -91,8 +99,8 @@ def b_form(
         P1 space of v.
     u
         Displacement, frozen during the v-step.
-    eps
-        Regularisation length ε; α = 1/(4ε).
+    surface
+        Crack density γ (AT2: α = 1/(4ε) and ε).
     lumped
         ``False``: ∫ vψ (|∇u|² + α), integrated exactly (the consistent P1 mass).
     bilinear
@@ -101,13 +109,12 @@ def b_form(
     gc
         Fracture toughness G_c.
     """
-    alpha = 1 / (4 * eps)
     density = grad(u) * grad(u) if bilinear is None else bilinear(u, u)
     v, psi = fes.TnT()
     form = BilinearForm(fes, symmetric=True)
-    form += ((density / gc + alpha) * v * psi + eps * grad(v) * grad(psi)) * (
-        lumped_dx() if lumped else exact_dx()
-    )
+    form += (
+        (density / gc + surface.reaction) * v * psi + surface.diffusion * grad(v) * grad(psi)
+    ) * (lumped_dx() if lumped else exact_dx())
     return form
 
 
@@ -266,26 +273,27 @@ class LumpedAssembler:
         """
         return self._scatter(self.square_mean(v) + eta)
 
-    def b_values(self, grad_u_sq: np.ndarray, eps: float) -> np.ndarray:
+    def b_values(self, grad_u_sq: np.ndarray, surface: CrackDensity) -> np.ndarray:
         """Return the values of b_j(u; ·, ·): ε·stiffness plus mass weighted with |∇u|² + α.
 
-        ``grad_u_sq`` is |∇u|² (anti-plane) or W(u)/G_c per element (:func:`b_form`).
+        ``grad_u_sq`` is |∇u|² (anti-plane) or W(u)/G_c per element (:func:`b_form`); α and ε
+        are the q and d of the crack density (AT2: the paper's).
 
         The mass is lumped (diagonal) or, with ``lumped=False``, the consistent element mass
         |T|/12 (1 + δ_ab).
         """
-        alpha = 1 / (4 * eps)
+        reaction, diffusion = surface.reaction, surface.diffusion
         arrays = self.arrays
         if not self.lumped:
             consistent = (np.ones((3, 3)) + np.eye(3)) / 12
-            return eps * self.laplace + self._scatter(
-                arrays.area * (grad_u_sq + alpha), consistent[None]
+            return diffusion * self.laplace + self._scatter(
+                arrays.area * (grad_u_sq + reaction), consistent[None]
             )
         diagonal = np.bincount(
             arrays.elements.ravel(),
-            weights=np.repeat(arrays.area * (grad_u_sq + alpha) / 3, 3),
+            weights=np.repeat(arrays.area * (grad_u_sq + reaction) / 3, 3),
             minlength=arrays.nv,
         )
-        values = eps * self.laplace
+        values = diffusion * self.laplace
         values[self.diagonal] += diagonal
         return values

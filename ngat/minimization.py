@@ -147,7 +147,7 @@ def estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
                 state.dirichlet_vertices, state.elasticity, state.dirichlet,
             ) / state.elasticity.modulus  # fmt: skip
         return nu_estimator(
-            state.arrays, state.edges, state.u_values, state.v_values, model.eps, crack,
+            state.arrays, state.edges, state.u_values, state.v_values, model.surface, crack,
             state.elasticity, model.gc,
         ) * model.gc  # fmt: skip
 

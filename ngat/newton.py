@@ -6,7 +6,8 @@ c_T = mean_T(v²) + η, the lumped mass m and K_T the element matrix of the mode
 (:mod:`ngat.elasticity`; ∇φ_a·∇φ_b|T| for the anti-plane model):
 
 - ∂I/∂u = 2 Σ_T c_T K_T u,  ∂I/∂v = 2 G_c (B(u) v − α m)  (B: the matrix of b_j, Definition 2,
-  with W(u)/G_c in place of |∇u|²);
+  with W(u)/G_c in place of |∇u|²; for AT1 the q, f, d of :mod:`ngat.crack_density` in
+  place of α, α, ε);
 - ∂²I/∂u² = 2 Σ_T c_T K_T,  ∂²I/∂v² = 2 G_c B(u),
   ∂²I/∂v_a∂u_b = (4/3) v_a (K_T u)_b on each element T ∋ a, b (for the anti-plane model
   (4/3) |T| v_a ∇u_T·∇φ_b).
@@ -33,7 +34,7 @@ import logging
 
 import ngsolve
 import numpy as np
-from ngsolve import BilinearForm, Variation, grad
+from ngsolve import BilinearForm, Variation
 from ngsolve.la import SparseMatrixd
 from scipy.linalg import eigh_tridiagonal
 
@@ -58,8 +59,7 @@ def energy_form(
     """
     u, v = space.TrialFunction()
     density = (elasticity or AntiPlane()).bilinear(u, u)
-    energy = (v * v + model.eta) * density
-    energy += model.gc * (model.alpha * (1 - v) * (1 - v) + model.eps * grad(v) * grad(v))
+    energy = (v * v + model.eta) * density + model.gc * model.surface.density(v)
     form = BilinearForm(space)
     form += Variation(energy * lumped_dx())
     return form
@@ -174,9 +174,10 @@ class NewtonSolver:
         strain = np.bincount(
             el.ravel(), weights=np.repeat(area * energy / 3, 3), minlength=arrays.nv
         )
+        surface = model.surface
         g_v = 2 * (
-            strain * v - model.gc * model.alpha * arrays.mass * (1 - v)
-            + model.gc * model.eps
+            strain * v + model.gc * arrays.mass * (surface.reaction * v - surface.source)
+            + model.gc * surface.diffusion
             * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
         )  # fmt: skip
         return np.concatenate([g_u, g_v])
@@ -189,8 +190,9 @@ class NewtonSolver:
         flux = density.flux(density.gradient(arrays, u))
         c = arrays.vertex_mean(v * v) + model.eta
         uu = 2 * c[:, None, None] * state.assembler.stiffness
-        mass_term = area * (density.density(arrays, u) + model.gc * model.alpha) / 3
-        vv = 2 * model.gc * model.eps * stiffness
+        surface = model.surface
+        mass_term = area * (density.density(arrays, u) + model.gc * surface.reaction) / 3
+        vv = 2 * model.gc * surface.diffusion * stiffness
         vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
         u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
         vu = (4 / 3) * area[:, None, None] * v[el][:, :, None] * u_flux[:, None, :]

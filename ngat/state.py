@@ -47,14 +47,15 @@ def lumped_energies(
     """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
 
     bulk = ∫ (P_j(v²) + η) W(u) and surface = G_c ∫ α P_j((1 − v)²) + ε |∇v|², with the energy
-    density W of the model (:mod:`ngat.elasticity`).
+    density W of the model (:mod:`ngat.elasticity`) and the crack density of
+    :mod:`ngat.crack_density` (AT2: the paper's; AT1: 3/(8ε) (1 − v) + (3ε/8) |∇v|²).
 
     Parameters
     ----------
     arrays
         Element geometry of the mesh.
     model
-        ε, η, α = 1/(4ε) and G_c.
+        ε, η, G_c and the crack density.
     u, v
         DOF values of the two P1 fields.
     square_mean
@@ -69,12 +70,8 @@ def lumped_energies(
             return arrays.vertex_mean(f * f)
 
     density = density or elasticity(model.model, model.young, model.poisson)
-    grad_v = arrays.gradient(v)
     bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * density.density(arrays, u))
-    surface = model.gc * (
-        model.alpha * np.dot(arrays.area, square_mean(1 - v))
-        + model.eps * np.sum(arrays.area * (grad_v**2).sum(1))
-    )
+    surface = model.gc * model.surface.energy(arrays, v, square_mean)
     return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 
 
@@ -189,7 +186,7 @@ class ATState:
                 self.b_assembler = self.assembler
             else:
                 self.b_matrix = (
-                    b_form(self.fes, self.u, self.model.eps, bilinear=density.bilinear)
+                    b_form(self.fes, self.u, self.model.surface, bilinear=density.bilinear)
                     .Assemble()
                     .mat
                 )
@@ -391,7 +388,7 @@ class ATState:
         arrays = self.arrays
         with self.timer("assembly"):
             density = self.elasticity.density(arrays, self.u_values) / self.model.gc
-            values = self.b_assembler.b_values(density, self.model.eps)
+            values = self.b_assembler.b_values(density, self.model.surface)
             self.b_matrix.AsVector().FV().NumPy()[:] = values
             self.v_values[crack] = 0.0
         with self.timer("solve"):
@@ -420,7 +417,7 @@ class ATState:
                 form = (
                     a_form(space, self.v, self.model.eta)
                     if stage == "u"
-                    else b_form(space, self.u, self.model.eps, gc=self.model.gc)
+                    else b_form(space, self.u, self.model.surface, gc=self.model.gc)
                 )
                 return AMGConjugateGradient(form, matrix, free)
             solver.values_changed(free)
@@ -442,8 +439,8 @@ class ATState:
             self.cg_not_converged += not solver.converged
 
     def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
-        """Add the solution of B δ = αm − B v on the solver's free DOFs to v."""
-        self._v_residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
+        """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2)."""
+        self._v_residual.FV().NumPy()[:] = self.model.surface.source * self.arrays.mass
         self._v_residual.data -= self.b_matrix * self.v.vec
         self._solve(solver, "v")
         self.v.vec.data += self._v_step
@@ -465,7 +462,7 @@ class ATState:
                 self._v_correction(self._b_solver)
             else:
                 self._v_correction(LaggedCholesky(self.b_matrix, inactive, 0))
-            self._v_residual.FV().NumPy()[:] = self.model.alpha * self.arrays.mass
+            self._v_residual.FV().NumPy()[:] = self.model.surface.source * self.arrays.mass
             self._v_residual.data -= self.b_matrix * self.v.vec
             gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
             new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))

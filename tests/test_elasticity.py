@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from ngsolve import CF, Integrate, x, y
 
+from ngat.crack_density import crack_density
 from ngat.elasticity import PlaneElasticity, elasticity, lame
+from ngat.estimators import nu_estimator
 from ngat.forms import LumpedAssembler, a_form, b_form, exact_dx, lumped_dx
 from ngat.geometry import generate_mesh, glue, rectangle
 from ngat.minimization import alternating_minimization
@@ -60,7 +62,9 @@ def test_vector_assembly_equals_ngsolve_forms(lumped):
     state.u.Set(CF((x * x - y, 0.3 * x * y + y)))
     density = state.elasticity
     a = a_form(state.fes_u, state.v, 1e-5, lumped=lumped, bilinear=density.bilinear).Assemble()
-    b = b_form(state.fes, state.u, 0.05, lumped=lumped, bilinear=density.bilinear).Assemble()
+    b = b_form(
+        state.fes, state.u, crack_density("at2", 0.05), lumped=lumped, bilinear=density.bilinear
+    ).Assemble()
     arrays = state.arrays
     vector = LumpedAssembler(
         arrays, a.mat, lumped, density.element_dofs(arrays), density.element_stiffness(arrays)
@@ -70,7 +74,7 @@ def test_vector_assembly_equals_ngsolve_forms(lumped):
     np.testing.assert_allclose(ours, reference, atol=1e-12 * abs(reference).max())
     scalar = LumpedAssembler(arrays, b.mat, lumped)
     reference = b.mat.AsVector().FV().NumPy()
-    ours = scalar.b_values(density.density(arrays, state.u_values), 0.05)
+    ours = scalar.b_values(density.density(arrays, state.u_values), crack_density("at2", 0.05))
     np.testing.assert_allclose(ours, reference, atol=1e-12 * abs(reference).max())
 
 
@@ -172,3 +176,50 @@ def test_newton_steps_converge_to_the_homogeneous_damage():
         errors.append(np.abs(state.v_values - exact).max())
     assert errors[-1] < 1e-7
     assert errors[2] < errors[1] ** 1.5
+
+
+@pytest.mark.parametrize("ratio", [0.5, 2.0])
+def test_at1_has_an_elastic_phase_then_the_homogeneous_damage(ratio):
+    # AT1: the minimiser of (v² + η) W + G_c 3/(8ε) (1 − v) over constants v ≤ 1 is v = 1 up to
+    # W_c = 3 G_c/(16ε) and v = W_c/W beyond (η neglected: 1e−5 relative).
+    gc, eps = 0.4, 0.1
+    critical = 3 * gc / (16 * eps)
+    t = np.sqrt(ratio * critical / textbook_density("plane_strain"))
+    state = plane_state("plane_strain", gc=gc, eps=eps, crack_density="at1")
+    state.apply_load(t)
+    parameters = Parameters().replace(
+        model="plane_strain", adapt="fixed", nonlinear="am", am_tol=1e-12, gc=gc, eps=eps,
+        crack_density="at1",
+    )  # fmt: skip
+    alternating_minimization(state, parameters.solver, parameters.adaptivity)
+    W = ratio * critical
+    v = min(1.0, critical / W)
+    np.testing.assert_allclose(state.v_values, v, rtol=1e-7)
+    area = 1.5**2
+    energies = state.energies()
+    assert energies["surface"] == pytest.approx(gc * 3 / (8 * eps) * (1 - v) * area, abs=1e-7)
+    # ν is the residual of the v-step where v is free and only its positive part where v = 1
+    # (there the rest is the bound's multiplier): 0 in both phases up to the AM tolerance,
+    # although in the elastic phase the residual W/G_c − 3/(16ε) is −0.94.
+    nu = nu_estimator(
+        state.arrays, state.edges, state.u_values, state.v_values, state.model.surface,
+        np.zeros(state.arrays.nv, dtype=bool), state.elasticity, gc,
+    )  # fmt: skip
+    assert nu.sum() < 1e-12
+
+
+def test_at1_newton_gradient_and_hessian_are_those_of_the_energy(assert_newton_matches_ngsolve):
+    state = plane_state("plane_strain", gc=0.4, eps=0.1, crack_density="at1")
+    state.apply_load(1.5)
+    rng = np.random.default_rng(4)
+    u = state.u_values + 0.01 * rng.random(len(state.u_values))
+    assert_newton_matches_ngsolve(state, u, rng.random(state.arrays.nv))
+
+
+def test_at1_without_the_bounded_v_step_is_refused():
+    from ngat.parameters import ParameterError
+
+    with pytest.raises(ParameterError, match="crack_density=at1 needs bounded_v=true"):
+        Parameters().replace(crack_density="at1", bounded_v=False)
+    with pytest.raises(ParameterError, match="crack_density"):
+        Parameters().replace(crack_density="at3")

@@ -29,6 +29,7 @@ from ngsolve import (
     y,
 )
 
+from ngat.crack_density import crack_density
 from ngat.estimators import EdgeTopology, meets, mu_estimator, nu_estimator
 from ngat.forms import MeshArrays
 from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
@@ -87,9 +88,13 @@ def test_patch_linear_u_has_flux_only_on_slit_faces():
     eps = 0.05
     alpha = 1 / (4 * eps)
     v = np.full(arrays.nv, alpha / (alpha + 1))
-    nu = nu_estimator(arrays, edges, u, v, eps, np.zeros(arrays.nv, dtype=bool))
+    nu = nu_estimator(
+        arrays, edges, u, v, crack_density("at2", eps), np.zeros(arrays.nv, dtype=bool)
+    )
     assert np.abs(nu).max() < 1e-24
-    nu = nu_estimator(arrays, edges, u, 0.5 * v, eps, np.zeros(arrays.nv, dtype=bool))
+    nu = nu_estimator(
+        arrays, edges, u, 0.5 * v, crack_density("at2", eps), np.zeros(arrays.nv, dtype=bool)
+    )
     assert nu.min() > 0
 
 
@@ -194,7 +199,9 @@ def test_nu_matches_ngsolve_integrals(cracked_state):
     )
     assert crack.any() and state.v_values.max() > 0.9
     edges = EdgeTopology(state.arrays)
-    fast = nu_estimator(state.arrays, edges, state.u_values, state.v_values, eps, crack)
+    fast = nu_estimator(
+        state.arrays, edges, state.u_values, state.v_values, crack_density("at2", eps), crack
+    )
     _check_agreement(fast, terms)
 
 
@@ -341,7 +348,9 @@ def test_estimator_cost_against_one_alternating_minimisation_iteration():
     )
     timings["mu"] = time.perf_counter() - start
     start = time.perf_counter()
-    nu = nu_estimator(state.arrays, edges, state.u_values, state.v_values, state.model.eps, crack)
+    nu = nu_estimator(
+        state.arrays, edges, state.u_values, state.v_values, state.model.surface, crack
+    )
     timings["nu"] = time.perf_counter() - start
     print(f"{mesh.ne} elements:", {k: f"{t:.3f} s" for k, t in timings.items()})
     assert mu.shape == nu.shape == (mesh.ne,)

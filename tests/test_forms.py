@@ -5,6 +5,7 @@ import pytest
 from ngsolve import H1, TRIG, CoefficientFunction, H1LumpingFESpace, Integrate, grad, x, y
 from ngsolve.meshes import MakeStructured2DMesh
 
+from ngat.crack_density import crack_density
 from ngat.forms import (
     LumpedAssembler,
     MeshArrays,
@@ -17,6 +18,9 @@ from ngat.forms import (
 from ngat.parameters import ModelParameters
 from ngat.scene import load_scene
 from ngat.state import ATState
+
+AT2 = crack_density("at2", 0.05)
+"""The paper's crack density with ε = 0.05."""
 
 
 def test_vertex_rule_matches_ngsolve_lumping_rule():
@@ -52,7 +56,7 @@ def test_fast_assembly_equals_ngsolve_forms(lumped):
     state.v.Set(0.5 + 0.4 * x * y / 42)
     state.u.Set(x * x - y)
     a = a_form(state.fes, state.v, 1e-5, lumped=lumped)
-    b = b_form(state.fes, state.u, 0.05, lumped=lumped)
+    b = b_form(state.fes, state.u, AT2, lumped=lumped)
     a.Assemble()
     b.Assemble()
     assembler = LumpedAssembler(state.arrays, a.mat, lumped=lumped)
@@ -61,7 +65,7 @@ def test_fast_assembly_equals_ngsolve_forms(lumped):
         assembler.a_values(state.v_values, 1e-5), a.mat.AsVector().FV().NumPy(), atol=1e-12
     )
     np.testing.assert_allclose(
-        assembler.b_values(grad_u_sq, 0.05), b.mat.AsVector().FV().NumPy(), atol=1e-11
+        assembler.b_values(grad_u_sq, AT2), b.mat.AsVector().FV().NumPy(), atol=1e-11
     )
 
 
@@ -75,11 +79,11 @@ def test_unlumped_forms_differ_from_lumped_ones():
     v, grad_u_sq = rng.uniform(0, 1, mesh.nv), rng.uniform(0, 5, mesh.ne)
     assert np.abs(lumped.a_values(v, 0) - consistent.a_values(v, 0)).max() > 1e-3
     assert (
-        np.abs(lumped.b_values(grad_u_sq, 0.05) - consistent.b_values(grad_u_sq, 0.05)).max() > 1e-3
+        np.abs(lumped.b_values(grad_u_sq, AT2) - consistent.b_values(grad_u_sq, AT2)).max() > 1e-3
     )
     # The total mass Σ_ab M_ab = ∫ 1 is the same, so the sums of all entries agree.
     np.testing.assert_allclose(
-        lumped.b_values(grad_u_sq, 0.05).sum(), consistent.b_values(grad_u_sq, 0.05).sum()
+        lumped.b_values(grad_u_sq, AT2).sum(), consistent.b_values(grad_u_sq, AT2).sum()
     )
 
 
@@ -113,7 +117,7 @@ def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
     fes_mat = a_form(H1(mesh, order=1), 1.0, 0.0)
     fes_mat.Assemble()
     assembler = LumpedAssembler(arrays, fes_mat.mat)
-    values = assembler.b_values(rng.uniform(0, 50, arrays.ne), 0.05)
+    values = assembler.b_values(rng.uniform(0, 50, arrays.ne), AT2)
     _, cols, rowptr = fes_mat.mat.CSR()
     rows = np.repeat(np.arange(arrays.nv), np.diff(np.asarray(rowptr, dtype=np.int64)))
     off = rows != np.asarray(cols, dtype=np.int64)
@@ -124,7 +128,7 @@ def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
     # diagonal even with ∇u = 0, so it is not an M-matrix on this non-obtuse mesh.
     alpha = 1 / (4 * 0.05)
     consistent = LumpedAssembler(arrays, fes_mat.mat, lumped=False).b_values(
-        np.zeros(arrays.ne), 0.05
+        np.zeros(arrays.ne), AT2
     )
     positive = consistent[off][consistent[off] > 0]
     assert len(positive) == 2 * 36

@@ -106,7 +106,7 @@ def test_bounded_v_step_keeps_the_consistent_mass_v_in_unit_interval(scene, mesh
     # Karush–Kuhn–Tucker conditions of min I_j over 0 ≤ v ≤ 1: the gradient B v − α m vanishes
     # where v is inside, is ≤ 0 where v = 1 and ≥ 0 where v = 0 (off the crack line).
     state.b_matrix.AsVector().FV().NumPy()[:] = state.assembler.b_values(
-        np.zeros(state.arrays.ne), state.model.eps
+        np.zeros(state.arrays.ne), state.model.surface
     )
     gradient = state.b_matrix.CreateColVector()
     gradient.data = state.b_matrix * state.v.vec

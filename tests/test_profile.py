@@ -76,3 +76,21 @@ def test_v_matches_the_optimal_profile(tmp_path):
     np.testing.assert_allclose(
         state.v_values, np.interp(state.arrays.coords[:, 1], y, v), atol=1e-6
     )
+
+
+def test_at1_profile_is_nodally_exact_with_the_predicted_energy(tmp_path):
+    # AT1 (crack_density=at1): the 1-D minimiser is v = 1 − (1 − |y|/(2ε))² for |y| < 2ε and
+    # v = 1 beyond (the bound v ≤ 1 holds it there). The lumped P1 solution interpolates it
+    # exactly; per element of the support the vertex rule overestimates ∫ 3/(8ε)(1 − v) by
+    # h³/(64 ε³) and the P1 gradient underestimates ∫ (3ε/8)|v'|² by h³/(128 ε³), so with
+    # 4ε/h elements the surface energy is exactly 1 + (h/ε)²/32.
+    scene = load_scene("profile-1d")
+    for h in [0.025, 0.0125]:
+        overrides = {"maxh": h, "eps": EPS, "crack_density": "at1"}
+        parameters, times = scene.configure(overrides=overrides)
+        result = run(scene, parameters, times, tmp_path / f"at1-{h}")
+        d = np.abs(result.state.arrays.coords[:, 1])
+        exact = np.where(d < 2 * EPS, 1 - (1 - d / (2 * EPS)) ** 2, 1.0)
+        np.testing.assert_allclose(result.state.v_values, exact, atol=1e-12)
+        surface = result.records[-1]["surface"] / LENGTH
+        assert surface == pytest.approx(1 + (h / EPS) ** 2 / 32, rel=1e-10)
