@@ -17,6 +17,12 @@ and a_j(v; u, u) = ∫ (P_j(v²) + η) W(u). With P1 elements ∇u, ε(u), s(u) 
 on each triangle. Units: lengths in the scene's unit L, E and W in units of force/L² (energy per
 area, plane problems per unit thickness), G_c in energy per length of crack (force/L).
 
+A plane model may split W = W⁺ + W⁻ and degrade only W⁺ (``split=voldev``,
+:class:`VolumetricDeviatoricSplit`): I_j then has (P_j(v²) + η) W⁺ + W⁻ in place of
+(P_j(v²) + η) W, and every method below has its split counterpart (``degraded_density``,
+``intact_density``, ``fluxes``, ``parts`` and ``weights``); without a split they return W, 0 and
+the one element matrix.
+
 An :class:`Elasticity` gives the P1 space of u and, from it, the symbolic bilinear form (the
 definition, :func:`ngat.forms.a_form`), the element matrices of the fast assembly
 (:class:`ngat.forms.LumpedAssembler`), the density per element (the v-step, the energies, ν of
@@ -27,11 +33,18 @@ from __future__ import annotations
 
 import ngsolve
 import numpy as np
-from ngsolve import H1, InnerProduct, Sym, Trace, VectorH1, grad
+from ngsolve import H1, IfPos, InnerProduct, Sym, Trace, VectorH1, grad
 
 from ngat.forms import MeshArrays
 
-__all__ = ["Elasticity", "AntiPlane", "PlaneElasticity", "lame", "elasticity"]
+__all__ = [
+    "Elasticity",
+    "AntiPlane",
+    "PlaneElasticity",
+    "VolumetricDeviatoricSplit",
+    "lame",
+    "elasticity",
+]
 
 
 class Elasticity:
@@ -81,6 +94,44 @@ class Elasticity:
     def density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
         """Return W(u) on each element, shape (ne,)."""
         raise NotImplementedError
+
+    # -- the energy split: W = W⁺ + W⁻, only W⁺ degraded (none by default) -------------------
+    split = False
+
+    def degraded_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return W⁺(u), the part of W that v degrades (all of W without a split)."""
+        return self.density(arrays, u)
+
+    def intact_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray | None:
+        """Return W⁻(u), the part v does not degrade; ``None`` without a split."""
+        return None
+
+    def fluxes(self, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Return the fluxes (s⁺, s⁻) of W⁺ and W⁻ (W^± = s^± : ∇u); s⁻ is ``None`` unsplit."""
+        return self.flux(gradient), None
+
+    def parts(self, arrays: MeshArrays) -> list[np.ndarray]:
+        """Return element matrices K_k whose weighted sum is the u-step's (:meth:`weights`)."""
+        return [self.element_stiffness(arrays)]
+
+    def weights(self, arrays: MeshArrays, u: np.ndarray, c: np.ndarray) -> list[np.ndarray]:
+        """Return the element weights of :meth:`parts` in a_j, with c_T = ∫_T P_j(v²)/|T| + η.
+
+        Without a split the u-step's element matrix is c_T K_T: one part, weight c.
+        """
+        return [c]
+
+    def tension(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray | None:
+        """Return the elements whose W⁺ holds the volumetric part; ``None`` without a split."""
+        return None
+
+    def degraded_form(self, u) -> ngsolve.CoefficientFunction:
+        """Return W⁺(u) as a CoefficientFunction (all of W without a split)."""
+        return self.bilinear(u, u)
+
+    def intact_form(self, u) -> ngsolve.CoefficientFunction | None:
+        """Return W⁻(u) as a CoefficientFunction; ``None`` without a split."""
+        return None
 
 
 class AntiPlane(Elasticity):
@@ -177,12 +228,99 @@ class PlaneElasticity(Elasticity):
         return self.mu * (strain**2).sum(axis=(1, 2)) + self.lam / 2 * trace**2
 
 
+class VolumetricDeviatoricSplit(PlaneElasticity):
+    """W⁺ = μ |dev ε|² + (K/2)⟨tr ε⟩₊², W⁻ = (K/2)⟨tr ε⟩₋² (Amor, Marigo, Maurini 2009).
+
+    Only the deviatoric and the tensile volumetric energy degrade, so a crack does not
+    interpenetrate and compression does not break the material. |dev ε|² = ε:ε − (tr ε)²/d and
+    K = λ + 2μ/d with d = 3 in plane strain (the deviator of the 3-D strain with ε_zz = 0) and
+    d = 2 in plane stress (the in-plane deviator, with λ*); W⁺ + W⁻ = W. With P1 elements tr ε
+    is constant per element, so the split is elementwise: the u-step's element matrix is
+    c_T K_dev + (c_T if tr ε_T ≥ 0 else 1) K_vol, with K_vol = |T| (K/2) div φ_a div φ_b and
+    K_dev the rest of the element matrix. The u-step's energy is then piecewise quadratic and
+    convex, and :meth:`ngat.state.ATState.solve_u` minimises it by a semismooth Newton method.
+
+    Parameters
+    ----------
+    lam, mu
+        Lamé constants λ (λ* for plane stress) and μ.
+    dimension
+        d of the deviator: 3 (plane strain) or 2 (plane stress).
+    """
+
+    split = True
+
+    def __init__(self, lam: float, mu: float, dimension: int):
+        super().__init__(lam, mu)
+        self.dimension = dimension
+        self.bulk = lam + 2 * mu / dimension
+
+    def parts(self, arrays: MeshArrays) -> list[np.ndarray]:
+        """Return [K_dev, K_vol] (see the class docstring)."""
+        g = arrays.grad_phi
+        volumetric = (
+            self.bulk / 2 * arrays.area[:, None, None]
+            * np.einsum("eai,ebj->eiajb", g, g).reshape(-1, 6, 6)
+        )  # fmt: skip
+        return [self.element_stiffness(arrays) - volumetric, volumetric]
+
+    def tension(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return tr ε ≥ 0 per element."""
+        gradient = self.gradient(arrays, u)
+        return gradient[:, 0, 0] + gradient[:, 1, 1] >= 0
+
+    def weights(self, arrays: MeshArrays, u: np.ndarray, c: np.ndarray) -> list[np.ndarray]:
+        """Return [c, c where tr ε ≥ 0 else 1]."""
+        return [c, np.where(self.tension(arrays, u), c, 1.0)]
+
+    def _split_trace(self, gradient: np.ndarray):
+        strain = self.strain(gradient)
+        trace = strain[:, 0, 0] + strain[:, 1, 1]
+        return strain, np.maximum(trace, 0.0), np.minimum(trace, 0.0)
+
+    def degraded_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return μ (ε:ε − (tr ε)²/d) + (K/2)⟨tr ε⟩₊²."""
+        strain, positive, negative = self._split_trace(self.gradient(arrays, u))
+        trace = positive + negative
+        deviatoric = (strain**2).sum(axis=(1, 2)) - trace**2 / self.dimension
+        return self.mu * deviatoric + self.bulk / 2 * positive**2
+
+    def intact_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return (K/2)⟨tr ε⟩₋²."""
+        _, _, negative = self._split_trace(self.gradient(arrays, u))
+        return self.bulk / 2 * negative**2
+
+    def fluxes(self, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return s⁺ = μ (ε − tr ε I/d) + (K/2)⟨tr ε⟩₊ I and s⁻ = (K/2)⟨tr ε⟩₋ I."""
+        strain, positive, negative = self._split_trace(gradient)
+        eye = np.eye(2)
+        trace = (positive + negative)[:, None, None]
+        plus = self.mu * (strain - trace / self.dimension * eye) + (
+            self.bulk / 2 * positive[:, None, None] * eye
+        )
+        return plus, self.bulk / 2 * negative[:, None, None] * eye
+
+    def degraded_form(self, u) -> ngsolve.CoefficientFunction:
+        """Return W⁺(u) as a CoefficientFunction."""
+        strain = Sym(grad(u))
+        trace = Trace(strain)
+        deviatoric = InnerProduct(strain, strain) - trace * trace / self.dimension
+        return self.mu * deviatoric + self.bulk / 2 * IfPos(trace, trace * trace, 0)
+
+    def intact_form(self, u) -> ngsolve.CoefficientFunction:
+        """Return W⁻(u) as a CoefficientFunction."""
+        trace = Trace(Sym(grad(u)))
+        return self.bulk / 2 * IfPos(trace, 0, trace * trace)
+
+
 def lame(young: float, poisson: float) -> tuple[float, float]:
     """Return the Lamé constants (λ, μ) of Young's modulus E and Poisson's ratio ν."""
     return young * poisson / ((1 + poisson) * (1 - 2 * poisson)), young / (2 * (1 + poisson))
 
 
-def elasticity(model: str, young: float = 1.0, poisson: float = 0.0) -> Elasticity:
+def elasticity(
+    model: str, young: float = 1.0, poisson: float = 0.0, split: str = "none"
+) -> Elasticity:
     """Return the energy density of ``model`` (one of :data:`MODELS`).
 
     Parameters
@@ -192,10 +330,14 @@ def elasticity(model: str, young: float = 1.0, poisson: float = 0.0) -> Elastici
         ``"plane_strain"`` or ``"plane_stress"``.
     young, poisson
         E and ν of the plane models (−1 < ν < 1/2).
+    split
+        ``"none"`` or ``"voldev"`` (plane models only): :class:`VolumetricDeviatoricSplit`.
     """
     if model == "antiplane":
         return AntiPlane()
     lam, mu = lame(young, poisson)
     if model == "plane_stress":
         lam = 2 * lam * mu / (lam + 2 * mu)
+    if split == "voldev":
+        return VolumetricDeviatoricSplit(lam, mu, 3 if model == "plane_strain" else 2)
     return PlaneElasticity(lam, mu)

@@ -152,11 +152,12 @@ def flux_jumps(
 
     Anti-plane (s = ∇u): the exact sparse map of the nodal values,
     :meth:`EdgeTopology.normal_flux_jump`; plane models: the element fluxes σ/2 of
-    :mod:`ngat.elasticity` applied to each edge's normal.
+    :mod:`ngat.elasticity` applied to each edge's normal (with an energy split, those of the
+    degraded part s⁺).
     """
     if elasticity.components == 1:
         return edges.normal_flux_jump(u)[:, None]
-    return edges.element_flux_jump(elasticity.flux(elasticity.gradient(arrays, u)))
+    return edges.element_flux_jump(elasticity.fluxes(elasticity.gradient(arrays, u))[0])
 
 
 def mu_estimator(
@@ -178,7 +179,8 @@ def mu_estimator(
 
     the residual of a_j(v; u, φ) = ∫ (P_j(v²) + η) s(u) : ∇φ = 0, with the flux s = ∇u of the
     paper (anti-plane) or s = σ(u)/2 of plane elasticity (:mod:`ngat.elasticity`,
-    docs/plane-elasticity.md): the element residual div((v² + η) s) = 2v s∇v for P1 u, and the
+    docs/plane-elasticity.md; with an energy split s⁺ in the first two terms and the flux
+    (v² + η) s⁺ + s⁻ on edges): the element residual div((v² + η) s) = 2v s∇v for P1 u, and the
     jump of the normal flux (v² + η)[s n] on interior edges, the flux (v² + η) s n itself on
     Neumann edges (outer boundary outside Ω̄_D and both faces of each slit). For s = ∇u this is
     Proposition 4 (i) term by term. The paper prints the edge term as ‖(v² + η)|∇u|²‖; the
@@ -217,7 +219,7 @@ def mu_estimator(
     elasticity = elasticity or AntiPlane()
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
     grad_v = arrays.gradient(v)
-    flux = elasticity.flux(elasticity.gradient(arrays, u))
+    flux, intact = elasticity.fluxes(elasticity.gradient(arrays, u))
     grad_v_sq = np.einsum("ek,ek->e", grad_v, grad_v)
     coupling = np.sqrt((np.einsum("eik,ek->ei", flux, grad_v) ** 2).sum(axis=1))  # |s∇v|
     indicators = h2 * h2 * grad_v_sq * grad_v_sq * (flux**2).sum(axis=(1, 2)) * area
@@ -230,10 +232,17 @@ def mu_estimator(
         + eta**2
     )
     jumps = flux_jumps(arrays, edges, elasticity, u)
+    held = np.zeros_like(jumps, dtype=bool)
     if fixed is not None:
         held = fixed.reshape(elasticity.components, -1)[:, edges.vertices].all(axis=2).T
         jumps = np.where(held, 0.0, jumps)
     per_edge = weight * (jumps**2).sum(axis=1)
+    if intact is not None:
+        # The flux (v² + η) s⁺ + s⁻ of an energy split: its jump is (v² + η)[s⁺n] + [s⁻n].
+        intact_jumps = np.where(held, 0.0, edges.element_flux_jump(intact))
+        mean = edges.length * ((a**2 + a * b + b**2) / 3 + eta)  # ∫_e (v² + η) ds
+        per_edge += 2 * mean * (jumps * intact_jumps).sum(axis=1)
+        per_edge += edges.length * (intact_jumps**2).sum(axis=1)
     per_edge[dirichlet[edges.vertices].all(axis=1)] = 0.0
     indicators += h * edges.element_sum(per_edge)
     indicators[meets(arrays, dirichlet)] = 0.0
@@ -258,9 +267,9 @@ def nu_estimator(
                         + h_T² ‖(α + |∇u|²)v − α‖²_{L2(T)} + ε² h_T ‖[∂_n v]‖²_{L2(∂T∖CR)},
 
     the residual of b_j(u; v, ψ) = 0, divided by G_c. For the plane models |∇u|² becomes
-    W(u)/G_c, the energy density of :mod:`ngat.elasticity` (the v-equation only sees W). For
-    the AT1 crack density (:mod:`ngat.crack_density`) α becomes its q (0) in the reaction and
-    its f (3/(16ε)) in the source, and ε its d (3ε/8).
+    W(u)/G_c, the energy density of :mod:`ngat.elasticity` (the v-equation only sees W; with
+    an energy split, W⁺). For the AT1 crack density (:mod:`ngat.crack_density`) α becomes its
+    q (0) in the reaction and its f (3/(16ε)) in the source, and ε its d (3ε/8).
 
     Where v = 1 the bound v ≤ 1 may hold v (always in AT1's elastic phase): there the
     residual's negative part, which would push v above 1, is the bound's multiplier, not an
@@ -299,7 +308,7 @@ def nu_estimator(
     """
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
     grad_v = arrays.gradient(v)
-    reaction = surface.reaction + (elasticity or AntiPlane()).density(arrays, u) / gc
+    reaction = surface.reaction + (elasticity or AntiPlane()).degraded_density(arrays, u) / gc
     indicators = h2 * h2 * np.einsum("ek,ek->e", grad_v, grad_v) * reaction * reaction * area
     local = v[arrays.elements]
     residual = reaction[:, None] * local - surface.source

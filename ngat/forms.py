@@ -256,6 +256,16 @@ class LumpedAssembler:
         weights = (coefficient[:, None, None] * local).ravel()
         return np.bincount(self.position, weights=weights, minlength=self.nnz)
 
+    def weighted_values(self, weights: list[np.ndarray], parts: list[np.ndarray]) -> np.ndarray:
+        """Return the values of Σ_k Σ_T weights_k,T parts_k,T (an energy split's a_j).
+
+        With one part and weight mean(v²) + η this is :meth:`a_values`, bit for bit.
+        """
+        values = self._scatter(weights[0], parts[0])
+        for weight, local in zip(weights[1:], parts[1:], strict=True):
+            values += self._scatter(weight, local)
+        return values
+
     def square_mean(self, values: np.ndarray) -> np.ndarray:
         """Return ∫_T P_j(w²) / |T| per element for a P1 function w, or ∫_T w² / |T| unlumped.
 

@@ -58,8 +58,11 @@ def energy_form(
     anti-plane |∇u|²); the space is then its space of u times P1.
     """
     u, v = space.TrialFunction()
-    density = (elasticity or AntiPlane()).bilinear(u, u)
-    energy = (v * v + model.eta) * density + model.gc * model.surface.density(v)
+    elasticity = elasticity or AntiPlane()
+    energy = (v * v + model.eta) * elasticity.degraded_form(u) + model.gc * model.surface.density(v)
+    intact = elasticity.intact_form(u)
+    if intact is not None:
+        energy += intact
     form = BilinearForm(space)
     form += Variation(energy * lumped_dx())
     return form
@@ -162,15 +165,17 @@ class NewtonSolver:
         state = self.state
         arrays, model, density = state.arrays, state.model, state.elasticity
         el, area = arrays.elements, arrays.area
-        flux, grad_v = density.flux(density.gradient(arrays, u)), arrays.gradient(v)
+        (flux, intact), grad_v = density.fluxes(density.gradient(arrays, u)), arrays.gradient(v)
         c = arrays.vertex_mean(v * v) + model.eta
-        # (K_T u)_(i,a) = |T| s_i·∇φ_a: a_j(v; u, φ_a e_i) on T.
+        # (K_T u)_(i,a) = |T| s_i·∇φ_a: a_j(v; u, φ_a e_i) on T (s = c s⁺ + s⁻ with a split).
         flux_u = np.einsum("eak,eik->eia", arrays.grad_phi, flux) * (area * c)[:, None, None]
+        if intact is not None:
+            flux_u += np.einsum("eak,eik->eia", arrays.grad_phi, intact) * area[:, None, None]
         flux_v = np.einsum("eak,ek->ea", arrays.grad_phi, grad_v) * area[:, None]
         g_u = 2 * np.bincount(
             density.element_dofs(arrays).ravel(), weights=flux_u.ravel(), minlength=len(u)
         )
-        energy = density.density(arrays, u)
+        energy = density.degraded_density(arrays, u)
         strain = np.bincount(
             el.ravel(), weights=np.repeat(area * energy / 3, 3), minlength=arrays.nv
         )
@@ -187,11 +192,13 @@ class NewtonSolver:
         state = self.state
         arrays, model, density = state.arrays, state.model, state.elasticity
         el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
-        flux = density.flux(density.gradient(arrays, u))
+        flux = density.fluxes(density.gradient(arrays, u))[0]
         c = arrays.vertex_mean(v * v) + model.eta
-        uu = 2 * c[:, None, None] * state.assembler.stiffness
+        weights = density.weights(arrays, u, c)
+        parts = state.stiffness_parts
+        uu = sum(2 * w[:, None, None] * part for w, part in zip(weights, parts, strict=True))
         surface = model.surface
-        mass_term = area * (density.density(arrays, u) + model.gc * surface.reaction) / 3
+        mass_term = area * (density.degraded_density(arrays, u) + model.gc * surface.reaction) / 3
         vv = 2 * model.gc * surface.diffusion * stiffness
         vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
         u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
@@ -351,13 +358,15 @@ class NewtonSolver:
         """
         state = self.state
         n = len(u)
-        start = lumped_energies(state.arrays, state.model, u, v)["total"]
+        start = lumped_energies(state.arrays, state.model, u, v, density=state.elasticity)["total"]
         scale = 1.0
         for _ in range(self.max_halvings + 1):
             u_trial = u + scale * direction[:n]
             v_trial = np.clip(v + scale * direction[n:], 0.0, upper)
             v_trial[crack] = 0.0
-            energy = lumped_energies(state.arrays, state.model, u_trial, v_trial)["total"]
+            energy = lumped_energies(
+                state.arrays, state.model, u_trial, v_trial, density=state.elasticity
+            )["total"]
             model = scale * slope + 0.5 * scale**2 * curvature
             if energy <= min(start + self.armijo * model, ceiling):
                 state.u_values[:] = u_trial

@@ -44,6 +44,9 @@ def _convert(kind: type, value: Any) -> Any:
 MODELS = ("antiplane", "plane_strain", "plane_stress")
 """The elastic energy densities W of the functional (:mod:`ngat.elasticity`)."""
 
+SPLITS = ("none", "voldev")
+"""The energy splits W = W⁺ + W⁻ (only W⁺ degrades; :mod:`ngat.elasticity`)."""
+
 
 @dataclass(frozen=True)
 class ModelParameters:
@@ -75,6 +78,10 @@ class ModelParameters:
     gc
         Fracture toughness G_c (energy per unit crack length): I_j's surface term is
         G_c [α P_j((1 − v)²) + ε |∇v|²]. The paper's 1 by default.
+    split
+        ``"none"``: all of W degrades; ``"voldev"`` (plane models): only the deviatoric and the
+        tensile volumetric energy degrade (Amor et al. 2009, :mod:`ngat.elasticity`), for scenes
+        with compression; the u-step is then solved by a semismooth Newton method.
     crack_density
         ``"at2"``: the paper's α P_j((1 − v)²) + ε |∇v|²; ``"at1"``: 3/(8ε) (1 − v) +
         (3ε/8) |∇v|², with an elastic phase below W = 3 G_c/(16ε) (:mod:`ngat.crack_density`).
@@ -89,6 +96,7 @@ class ModelParameters:
     young: float = 1.0
     poisson: float = 0.0
     gc: float = 1.0
+    split: str = "none"
     crack_density: str = "at2"
 
     @property
@@ -131,6 +139,14 @@ class ModelParameters:
             )
         if not 0 < self.gc < float("inf"):
             raise ParameterError(f"gc must be positive and finite, got gc={self.gc}")
+        if self.split not in SPLITS:
+            raise ParameterError(f"split must be one of {', '.join(SPLITS)}, got {self.split!r}")
+        if self.split != "none" and self.model == "antiplane":
+            raise ParameterError(
+                f"split={self.split} splits the strain into volumetric and deviatoric parts: "
+                "the antiplane model has no volumetric strain; choose model=plane_strain or "
+                "plane_stress, or split=none"
+            )
         if self.crack_density not in CRACK_DENSITIES:
             raise ParameterError(
                 f"crack_density must be one of {', '.join(CRACK_DENSITIES)}, "

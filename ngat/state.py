@@ -46,9 +46,10 @@ def lumped_energies(
 ) -> dict[str, float]:
     """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
 
-    bulk = ∫ (P_j(v²) + η) W(u) and surface = G_c ∫ α P_j((1 − v)²) + ε |∇v|², with the energy
-    density W of the model (:mod:`ngat.elasticity`) and the crack density of
-    :mod:`ngat.crack_density` (AT2: the paper's; AT1: 3/(8ε) (1 − v) + (3ε/8) |∇v|²).
+    bulk = ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) (W⁺ = W, W⁻ = 0 without an energy split) and
+    surface = G_c ∫ α P_j((1 − v)²) + ε |∇v|², with the energy density W of the model
+    (:mod:`ngat.elasticity`) and the crack density of :mod:`ngat.crack_density` (AT2: the
+    paper's; AT1: 3/(8ε) (1 − v) + (3ε/8) |∇v|²).
 
     Parameters
     ----------
@@ -69,8 +70,11 @@ def lumped_energies(
         def square_mean(f):
             return arrays.vertex_mean(f * f)
 
-    density = density or elasticity(model.model, model.young, model.poisson)
-    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * density.density(arrays, u))
+    density = density or elasticity(model.model, model.young, model.poisson, model.split)
+    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * density.degraded_density(arrays, u))
+    intact = density.intact_density(arrays, u)
+    if intact is not None:
+        bulk += np.dot(arrays.area, intact)
     surface = model.gc * model.surface.energy(arrays, v, square_mean)
     return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 
@@ -148,7 +152,7 @@ class ATState:
         self.cg_not_converged = 0
         self.t = Parameter(0.0)
         self.crack = crack
-        self.elasticity = elasticity(model.model, model.young, model.poisson)
+        self.elasticity = elasticity(model.model, model.young, model.poisson, model.split)
         self.loads, self.load_components = {}, {}
         for name, g in loads.items():
             self.load_components[name], self.loads[name] = self._load(name, g(self.t))
@@ -181,6 +185,7 @@ class ATState:
                 arrays, self.a_matrix, self.model.lumping,
                 density.element_dofs(arrays), density.element_stiffness(arrays),
             )  # fmt: skip
+            self.stiffness_parts = density.parts(arrays)
             if density.components == 1:
                 self.b_matrix = self.a_matrix.CreateMatrix()
                 self.b_assembler = self.assembler
@@ -356,17 +361,63 @@ class ATState:
                 out[i * nv : (i + 1) * nv][dofs] = total[dofs] / count[dofs]
 
     # -- half-steps -------------------------------------------------------------------------
-    def solve_u(self) -> None:
-        """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1)."""
-        with self.timer("assembly"):
-            self.a_matrix.AsVector().FV().NumPy()[:] = self.assembler.a_values(
-                self.v_values, self.model.eta
-            )
-        with self.timer("solve"):
-            self._a_solver = self._refreshed(self._a_solver, "u", ~self.dirichlet)
-            self._residual.data = -1 * (self.a_matrix * self.u.vec)
-            self._solve(self._a_solver)
-            self.u.vec.data += self._correction
+    def u_matrix_values(self) -> np.ndarray:
+        """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).
+
+        Each element contributes c_T K_T, c_T = ∫_T P_j(v²)/|T| + η; with an energy split, the
+        weights of its parts follow the sign of tr ε(u) on T (:mod:`ngat.elasticity`).
+        """
+        c = self.assembler.square_mean(self.v_values) + self.model.eta
+        weights = self.elasticity.weights(self.arrays, self.u_values, c)
+        return self.assembler.weighted_values(weights, self.stiffness_parts)
+
+    def solve_u(self, max_iterations: int = 50) -> None:
+        """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1).
+
+        Without an energy split this is one linear solve. With one, I_j(·, v) is convex and
+        piecewise quadratic (the volumetric part of an element degrades only in tension), and
+        a semismooth Newton method minimises it: solve with the element matrices of the current
+        tension pattern, halve the step while the energy would rise, and stop when the pattern
+        no longer changes (the minimiser of that quadratic piece is then the minimiser).
+        """
+        u = self.u_values
+        for _ in range(max_iterations):
+            tension = self.elasticity.tension(self.arrays, u)
+            with self.timer("assembly"):
+                self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
+            with self.timer("solve"):
+                self._a_solver = self._refreshed(self._a_solver, "u", ~self.dirichlet)
+                self._residual.data = -1 * (self.a_matrix * self.u.vec)
+                self._solve(self._a_solver)
+            if tension is None:
+                self.u.vec.data += self._correction
+                return
+            step = self._correction.FV().NumPy().copy()
+            if self._split_step(step, tension):
+                return
+        log.warning("split u-step: tension pattern not settled after %d iterations", max_iterations)
+
+    def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
+        """Move u along a semismooth Newton step; return whether the u-step has converged."""
+        u = self.u_values
+        start, scale = self._bulk_energy(u), 1.0
+        for _ in range(30):
+            trial = u + scale * step
+            if self._bulk_energy(trial) <= start:
+                break
+            scale /= 2
+        u[:] = trial
+        settled = np.array_equal(self.elasticity.tension(self.arrays, u), tension)
+        return scale == 1.0 and settled or np.abs(scale * step).max() <= 1e-14 * np.abs(u).max()
+
+    def _bulk_energy(self, u: np.ndarray) -> float:
+        """Return ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) at the current v."""
+        arrays, density = self.arrays, self.elasticity
+        c = self.assembler.square_mean(self.v_values) + self.model.eta
+        return float(
+            np.dot(arrays.area, c * density.degraded_density(arrays, u))
+            + np.dot(arrays.area, density.intact_density(arrays, u))
+        )
 
     def solve_v(self, crack: np.ndarray) -> None:
         """v-step: minimise I_j(u, ·) over X_{j,CR} with 0 ≤ v ≤ 1 (Algorithm 1, step 2.2).
@@ -387,7 +438,7 @@ class ATState:
         """
         arrays = self.arrays
         with self.timer("assembly"):
-            density = self.elasticity.density(arrays, self.u_values) / self.model.gc
+            density = self.elasticity.degraded_density(arrays, self.u_values) / self.model.gc
             values = self.b_assembler.b_values(density, self.model.surface)
             self.b_matrix.AsVector().FV().NumPy()[:] = values
             self.v_values[crack] = 0.0
@@ -494,9 +545,7 @@ class ATState:
         ``force_<region>_x`` and ``_y`` per component); ``force`` = 2 r·∂g/∂t is the derivative
         of the bulk energy with respect to the load parameter t.
         """
-        self.a_matrix.AsVector().FV().NumPy()[:] = self.assembler.a_values(
-            self.v_values, self.model.eta
-        )
+        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
         self._residual.data = self.a_matrix * self.u.vec
         residual = 2 * self._residual.FV().NumPy()
         components = self.elasticity.components

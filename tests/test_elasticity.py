@@ -223,3 +223,104 @@ def test_at1_without_the_bounded_v_step_is_refused():
         Parameters().replace(crack_density="at1", bounded_v=False)
     with pytest.raises(ParameterError, match="crack_density"):
         Parameters().replace(crack_density="at3")
+
+
+@pytest.mark.parametrize("model", ["plane_strain", "plane_stress"])
+def test_voldev_split_parts_sum_to_the_unsplit_model(model):
+    # W⁺ + W⁻ = W, s⁺ + s⁻ = s and K_dev + K_vol = K on a field with elements in tension and
+    # in compression; W⁻ lives only where tr ε < 0, and K_vol is the bulk modulus' part.
+    state = plane_state(model, split="voldev")
+    state.u.Set(CF((0.1 * x * x - 0.05 * y, 0.03 * x * y - 0.08 * y * y)))
+    split, arrays, u = state.elasticity, state.arrays, state.u_values
+    whole = elasticity(model, E, NU)
+    tension = split.tension(arrays, u)
+    assert tension.any() and not tension.all()
+    W_plus, W_minus = split.degraded_density(arrays, u), split.intact_density(arrays, u)
+    W = whole.density(arrays, u)
+    np.testing.assert_allclose(W_plus + W_minus, W, rtol=1e-12, atol=1e-13 * W.max())
+    assert np.all(W_minus[tension] == 0) and np.all(W_minus[~tension] > 0)
+    assert np.all(W_plus >= 0)
+    gradient = split.gradient(arrays, u)
+    plus, minus = split.fluxes(gradient)
+    np.testing.assert_allclose(plus + minus, whole.flux(gradient), atol=1e-15)
+    dev, vol = split.parts(arrays)
+    np.testing.assert_allclose(dev + vol, whole.element_stiffness(arrays), atol=1e-14)
+    # K_vol u · u = |T| (K/2) (tr ε)², with K = λ + 2μ/d (d = 3 plane strain, 2 plane stress).
+    lam, mu = whole.lam, whole.mu
+    bulk = lam + 2 * mu / (3 if model == "plane_strain" else 2)
+    local = u[split.element_dofs(arrays)]
+    trace = gradient[:, 0, 0] + gradient[:, 1, 1]
+    volumetric = arrays.area * bulk / 2 * trace**2
+    np.testing.assert_allclose(
+        np.einsum("ea,eab,eb->e", local, vol, local), volumetric, atol=1e-12 * volumetric.max()
+    )
+
+
+def test_voldev_newton_gradient_and_hessian_are_those_of_the_energy(assert_newton_matches_ngsolve):
+    # The split energy is C¹ and piecewise quadratic: away from tr ε = 0 its Hessian is that of
+    # the element's quadratic piece, which NGSolve's linearisation of IfPos gives as well.
+    state = plane_state("plane_strain", gc=0.4, eps=0.1, split="voldev")
+    state.u.Set(CF((0.1 * x * x - 0.05 * y, 0.03 * x * y - 0.08 * y * y)))
+    tension = state.elasticity.tension(state.arrays, state.u_values)
+    assert tension.any() and not tension.all()
+    rng = np.random.default_rng(5)
+    assert_newton_matches_ngsolve(state, state.u_values.copy(), rng.random(state.arrays.nv))
+
+
+def test_voldev_u_step_is_the_minimiser_of_the_split_energy():
+    # With v varying and a load that compresses part of the body, the semismooth Newton u-step
+    # ends at a u whose own tension pattern makes it stationary: the gradient 2 A(P(u)) u of
+    # the convex C¹ bulk energy vanishes at the free DOFs, so u is its minimiser.
+    state = plane_state("plane_strain", split="voldev")
+    state.apply_load(5.0)
+    state.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
+    state.solve_u()
+    tension = state.elasticity.tension(state.arrays, state.u_values)
+    assert tension.any() and not tension.all()
+    residual = state.a_matrix.CreateColVector()
+    state.a_matrix.AsVector().FV().NumPy()[:] = state.u_matrix_values()
+    residual.data = state.a_matrix * state.u.vec
+    r = residual.FV().NumPy()
+    assert np.abs(r[~state.dirichlet]).max() < 1e-10 * np.abs(r).max()
+    # The unsplit u-step on the same v gives another u, with more energy in compression.
+    unsplit = plane_state("plane_strain")
+    unsplit.apply_load(5.0)
+    unsplit.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
+    unsplit.solve_u()
+    assert np.abs(unsplit.u_values - state.u_values).max() > 1e-3 * np.abs(state.u_values).max()
+
+
+def test_voldev_homogeneous_compression_degrades_only_the_deviatoric_part():
+    # u = -t ε x with tr ε < 0: W⁺ = μ|dev ε|², W⁻ = (K/2)(tr ε)², and the homogeneous AT2
+    # damage is v = α G_c/(α G_c + W⁺) (the volumetric part does not drive the crack).
+    gc, t = 0.4, -3.0
+    state = plane_state("plane_strain", gc=gc, eps=0.1, split="voldev")
+    state.apply_load(t)
+    parameters = Parameters().replace(
+        model="plane_strain", adapt="fixed", nonlinear="am", am_tol=1e-12, gc=gc, eps=0.1,
+        split="voldev",
+    )  # fmt: skip
+    alternating_minimization(state, parameters.solver, parameters.adaptivity)
+    lam, mu = lame(E, NU)
+    strain = t * STRAIN
+    trace = np.trace(strain)
+    assert trace < 0
+    W_plus = mu * ((strain**2).sum() - trace**2 / 3)
+    W_minus = (lam + 2 * mu / 3) / 2 * trace**2
+    arrays = state.arrays
+    np.testing.assert_allclose(state.elasticity.degraded_density(arrays, state.u_values), W_plus,
+                               rtol=1e-6)  # fmt: skip
+    alpha = state.model.alpha
+    v = alpha * gc / (alpha * gc + W_plus)
+    np.testing.assert_allclose(state.v_values, v, rtol=1e-7)
+    bulk = ((v * v + state.model.eta) * W_plus + W_minus) * 1.5**2
+    assert state.energies()["bulk"] == pytest.approx(bulk, rel=1e-6)
+
+
+def test_split_on_the_antiplane_model_is_refused():
+    from ngat.parameters import ParameterError
+
+    with pytest.raises(ParameterError, match="antiplane model has no volumetric strain"):
+        Parameters().replace(split="voldev")
+    with pytest.raises(ParameterError, match="split must be one of"):
+        Parameters().replace(model="plane_strain", split="spectral")
