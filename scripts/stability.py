@@ -11,7 +11,9 @@ Scene: ``two-slits`` in its ``--quick`` setting (every fifth load step, element 
 changed per case as listed in ``CASES``; the cases in ``CASE_SCENES`` use their own scene
 instead (``obtuse-line``: a fixed sheared mesh, every triangle with a 161.6° angle, sheared
 anti-plane between two slanted grips until it breaks, with the lumped and with the consistent
-mass, ``lumping=false``). Each cell runs in its own process with a time limit and records:
+mass, ``lumping=false``; ``sent`` and ``sens``: the plane-strain benchmarks at ε = 0.02 mm,
+``sens`` with and without the volumetric–deviatoric split, judged by their crack paths).
+Each cell runs in its own process with a time limit and records:
 status (converged, not converged, failed with the error, timeout and the load time reached), AM
 iterations, linear solves, Newton steps, steps along negative curvature and the extra solves
 that found it, rejected accelerated or Newton steps, CG iterations
@@ -43,6 +45,10 @@ QUICK_TIMES = np.round(np.arange(0.0, 1.61, 0.05), 10)
 LONG_TIMES = np.round(np.arange(0.0, 2.01, 0.05), 10)  # coarse meshes break late
 GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 10)
 SHEARED_TIMES = np.round(np.arange(0.0, 0.801, 0.02), 10)
+SENT_TIMES = np.round(np.r_[np.arange(0.0, 0.0051, 1e-3), np.arange(0.0055, 0.0081, 5e-4)], 10)
+SENS_TIMES = np.round(np.r_[np.arange(0.0, 0.0081, 2e-3), np.arange(0.009, 0.0201, 1e-3)], 10)
+PLANE = {"eps": 0.02, "floor": 0.1, "band_h": 0.35}
+"""The plane benchmarks at ε = 0.02 mm (ℓ = 0.04 mm, 5× the published): cells within minutes."""
 CASES = {
     # name: (parameter changes, load times)
     "growth window Δt=0.01": ({}, GROWTH_TIMES),
@@ -66,9 +72,16 @@ CASES = {
     "obtuse mesh (sheared), no v bounds, consistent mass":
         ({"bounded_v": False, "lumping": False}, SHEARED_TIMES),
     "obtuse mesh (sheared), consistent mass": ({"lumping": False}, SHEARED_TIMES),
+    "sent (plane strain, ε=0.02)": (PLANE, SENT_TIMES),
+    "sens (plane strain, ε=0.02, split)": (PLANE, SENS_TIMES),
+    "sens (plane strain, ε=0.02, no split)": ({**PLANE, "split": "none"}, SENS_TIMES),
 }  # fmt: skip
 # Cases with their own scene (the others run two-slits).
-CASE_SCENES = {case: "obtuse-line" for case in CASES if case.startswith("obtuse mesh (sheared)")}
+CASE_SCENES = {
+    case: "obtuse-line" if case.startswith("obtuse") else case.split(" ")[0]
+    for case in CASES
+    if case.startswith(("obtuse mesh (sheared)", "sent", "sens"))
+}
 METHODS = [*NONLINEAR_SOLVERS, "newton/paper"]
 """Columns: every solver with the default adaptivity (``band``), and the default solver with
 the paper's Algorithm 2 alone (``adapt=paper``)."""
@@ -118,6 +131,9 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
             "fracture_time": result.summary.get("fracture_time", ""),
             "energy_1.0": next((r["total"] for r in records if np.isclose(r["t"], 1.0)), ""),
             "diagnostics": " ".join(sorted({p["kind"] for p in result.summary["diagnostics"]})),
+            "peak_force": max(r["force"] for r in records),
+            "tip_x": records[-1].get("tip1_x", ""),
+            "tip_y": records[-1].get("tip1_y", ""),
             "solve_s": result.summary["timing"].get("solve", 0.0),
         }
     except Exception as error:  # noqa: BLE001 - a failed cell is a result of the study
@@ -155,11 +171,14 @@ def judge(row: dict, case: str) -> dict:
 
     two-slits cells: the fracture time within one load step (and at least 0.02) of the
     converged reference (1.39) and E(1.0) within 0.5 % of it; obtuse-line cells: the break
-    within one load step of 0.50. Returns ``fracture_error``, ``energy_error_%`` (where they
-    apply) and ``verdict``: ``right``, ``wrong: …`` or empty for cells that did not finish.
+    within one load step of 0.50; ``sent`` and ``sens``: the crack path (:func:`judge_path`).
+    Returns ``fracture_error``, ``energy_error_%`` (where they apply) and ``verdict``:
+    ``right``, ``wrong: …`` or empty for cells that did not finish.
     """
     if row.get("status") not in ("converged", "not converged"):
         return {"verdict": ""}
+    if CASE_SCENES.get(case) in ("sent", "sens"):
+        return judge_path(row, CASE_SCENES[case])
     times = CASES[case][1]
     tolerance = max(float(np.max(np.diff(times))), 0.02)
     obtuse = CASE_SCENES.get(case) == "obtuse-line"
@@ -183,6 +202,23 @@ def judge(row: dict, case: str) -> dict:
         if abs(error) > 0.5:
             wrong.append(f"E(1.0) {error:+.2f} %")
     return {**scores, "verdict": "wrong: " + ", ".join(wrong) if wrong else "right"}
+
+
+def judge_path(row: dict, scene: str) -> dict:
+    """Score a plane benchmark by its crack path: the plate must break along the right path.
+
+    ``sent``: the crack runs straight, its tip ends within 0.05 of y = 0.5 at the right edge
+    (x > 0.9). ``sens``: the crack curves down towards the lower right corner, its tip ends
+    below y = 0.35 (Miehe et al. 2010; straight on would end at 0.5).
+    """
+    x, y = row.get("tip_x", ""), row.get("tip_y", "")
+    if row.get("fracture_time", "") in ("", None) or x == "":
+        return {"verdict": "wrong: never breaks"}
+    if scene == "sent":
+        right = x > 0.9 and abs(y - 0.5) < 0.05
+    else:
+        right = y < 0.35
+    return {"verdict": "right" if right else f"wrong: crack ends at ({x:.2f}, {y:.2f})"}
 
 
 def convert(row: dict) -> dict:
