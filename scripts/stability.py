@@ -47,6 +47,7 @@ GROWTH_TIMES = np.round(np.r_[0.0, 0.6, 1.0, 1.2, np.arange(1.3, 1.501, 0.01)], 
 SHEARED_TIMES = np.round(np.arange(0.0, 0.801, 0.02), 10)
 SENT_TIMES = np.round(np.r_[np.arange(0.0, 0.0051, 1e-3), np.arange(0.0055, 0.0081, 5e-4)], 10)
 SENS_TIMES = np.round(np.r_[np.arange(0.0, 0.0081, 2e-3), np.arange(0.009, 0.0201, 1e-3)], 10)
+SURFING_TIMES = np.round(0.05 * np.arange(31), 10)
 PLANE = {"eps": 0.02, "floor": 0.1, "band_h": 0.35}
 """The plane benchmarks at ε = 0.02 mm (ℓ = 0.04 mm, 5× the published): cells within minutes."""
 CASES = {
@@ -72,6 +73,7 @@ CASES = {
     "obtuse mesh (sheared), no v bounds, consistent mass":
         ({"bounded_v": False, "lumping": False}, SHEARED_TIMES),
     "obtuse mesh (sheared), consistent mass": ({"lumping": False}, SHEARED_TIMES),
+    "running crack (surfing, unstructured maxh=10ε)": ({"eps": 0.02, "maxh": 0.2}, SURFING_TIMES),
     "sent (plane strain, ε=0.02)": (PLANE, SENT_TIMES),
     "sens (plane strain, ε=0.02, split)": (PLANE, SENS_TIMES),
     "sens (plane strain, ε=0.02, no split)": ({**PLANE, "split": "none"}, SENS_TIMES),
@@ -82,6 +84,40 @@ CASE_SCENES = {
     for case in CASES
     if case.startswith(("obtuse mesh (sheared)", "sent", "sens"))
 }
+CASE_SCENES["running crack (surfing, unstructured maxh=10ε)"] = "surfing"
+STEADY_FROM = 0.5
+"""surfing: the tip speed and toughness are fitted over t ≥ 0.5 (after the ramp to 0.25)."""
+
+
+def load_case_scene(case: str):
+    """Return the scene of a case (surfing: meshed by Netgen, no band along the path)."""
+    from ngat.geometries import surfing
+    from ngat.scene import load_scene
+
+    name = CASE_SCENES.get(case, "two-slits")
+    if name == "surfing":
+        return surfing.make_scene(eps=CASES[case][0]["eps"], structured=False)
+    return load_scene(name)
+
+
+def steady_measures(records: list[dict], eps: float) -> dict:
+    """Return the surfing crack's tip speed / V and toughness dS/da / G_eff(h_crack)."""
+    from ngat.geometries import surfing
+
+    steady = [r for r in records if r["t"] >= STEADY_FROM - 1e-9]
+    if len(steady) < 3 or "tip1_x" not in steady[0]:
+        return {}
+    rates = surfing.steady_rates(
+        [r["t"] for r in steady], [r["tip1_x"] for r in steady], [r["surface"] for r in steady]
+    )
+    h = float(np.median([r["h_crack"] for r in records if r["h_crack"] > 0]))
+    return {
+        "speed_ratio": round(rates["speed"] / surfing.SPEED, 4),
+        "toughness_ratio": round(rates["toughness"] / surfing.effective_toughness(h, eps), 4),
+        "h_crack_over_eps": round(h / eps, 3),
+    }
+
+
 METHODS = [*NONLINEAR_SOLVERS, "newton/paper"]
 """Columns: every solver with the default adaptivity (``band``), and the default solver with
 the paper's Algorithm 2 alone (``adapt=paper``)."""
@@ -100,10 +136,9 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
     cell stopped at the time limit can say how far it got.
     """
     from ngat.driver import run
-    from ngat.scene import load_scene
 
     changes, times = CASES[case]
-    scene = load_scene(CASE_SCENES.get(case, "two-slits"))
+    scene = load_case_scene(case)
     begin = time.perf_counter()
 
     def on_step(record: dict) -> None:
@@ -134,6 +169,11 @@ def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None
             "peak_force": max(r["force"] for r in records),
             "tip_x": records[-1].get("tip1_x", ""),
             "tip_y": records[-1].get("tip1_y", ""),
+            **(
+                steady_measures(records, parameters.model.eps)
+                if CASE_SCENES.get(case) == "surfing"
+                else {}
+            ),
             "solve_s": result.summary["timing"].get("solve", 0.0),
         }
     except Exception as error:  # noqa: BLE001 - a failed cell is a result of the study
@@ -179,6 +219,8 @@ def judge(row: dict, case: str) -> dict:
         return {"verdict": ""}
     if CASE_SCENES.get(case) in ("sent", "sens"):
         return judge_path(row, CASE_SCENES[case])
+    if CASE_SCENES.get(case) == "surfing":
+        return judge_running_crack(row)
     times = CASES[case][1]
     tolerance = max(float(np.max(np.diff(times))), 0.02)
     obtuse = CASE_SCENES.get(case) == "obtuse-line"
@@ -202,6 +244,18 @@ def judge(row: dict, case: str) -> dict:
         if abs(error) > 0.5:
             wrong.append(f"E(1.0) {error:+.2f} %")
     return {**scores, "verdict": "wrong: " + ", ".join(wrong) if wrong else "right"}
+
+
+def judge_running_crack(row: dict) -> dict:
+    """Score the surfing cell: tip speed within 2 % of V, dS/da within 3 % of G_eff(h_crack)."""
+    if "speed_ratio" not in row:
+        return {"verdict": "wrong: the crack does not run"}
+    wrong = []
+    if abs(row["speed_ratio"] - 1) > 0.02:
+        wrong.append(f"tip speed {row['speed_ratio']:.3f} V")
+    if abs(row["toughness_ratio"] - 1) > 0.03:
+        wrong.append(f"dS/da {row['toughness_ratio']:.3f} G_eff")
+    return {"verdict": "wrong: " + ", ".join(wrong) if wrong else "right"}
 
 
 def judge_path(row: dict, scene: str) -> dict:
