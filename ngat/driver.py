@@ -43,6 +43,7 @@ from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
+from ngat.strategies import nonlinear_strategy
 from ngat.threads import FixedThreads
 from ngat.timing import PhaseTimer
 
@@ -203,6 +204,7 @@ def _run_locked(
             mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
             solver.bounded_v, solver.linear_solver,
         )  # fmt: skip
+        strategy = nonlinear_strategy(solver)
         check_slits(mesh, scene.slits, scene.name)
         if parameters.adaptivity.adapt == "fixed" and parameters.adaptivity.resolve_eps:
             check_fixed_mesh(state, scene.slits, parameters.model.eps)
@@ -219,7 +221,7 @@ def _run_locked(
             predicted = band.refine(state) if band else 0
             try:
                 step = alternating_minimization(
-                    state, parameters.solver, parameters.adaptivity, monitor, band
+                    state, solver, parameters.adaptivity, monitor, band, strategy
                 )
             except ConvergenceError as error:
                 diagnostics.report("nan", str(error), k, float(t), raise_now=False)

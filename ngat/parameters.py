@@ -155,7 +155,8 @@ class ModelParameters:
 
 
 NONLINEAR_SOLVERS = ("am", "overrelaxed", "anderson", "newton", "anderson-newton")
-"""The solvers of one load step (:func:`ngat.minimization.alternating_minimization`)."""
+"""The solvers of one load step, each a strategy of :mod:`ngat.strategies`
+(:data:`ngat.strategies.STRATEGIES`)."""
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ class SolverParameters:
         ``linear-not-converged``, :mod:`ngat.diagnostics`). Newton steps solve their coupled
         system directly in either case.
     nonlinear
-        Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
+        Solver of one load step (:mod:`ngat.strategies`): ``"am"`` plain alternating
         minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
         ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
         accelerated steps fall back to the plain one whenever it has lower energy;
