@@ -11,8 +11,9 @@ an iteration that refined the band does not count as converged.
 The loop is the same for every ``nonlinear`` solver, all with the same stopping test on an
 alternating-minimisation iteration; what a solver adds between the half-steps (acceleration,
 Newton steps) is a strategy of :mod:`ngat.strategies`, taken from
-:func:`ngat.strategies.nonlinear_strategy`. The step's :class:`StepResult` gathers the
-statistics the strategy and the linear solves report.
+:func:`ngat.strategies.nonlinear_strategy`, and the half-steps themselves are solved by
+:class:`ngat.halfsteps.HalfStepSolvers`. The step's :class:`StepResult` gathers the statistics
+that both report.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 
 from ngat.band import CrackBand
 from ngat.estimators import mu_estimator, nu_estimator
+from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
 from ngat.state import ATState
@@ -73,6 +75,8 @@ class StepResult:
     energy_increases
         Iterations on an unchanged mesh that increased I_j (should be 0: each half-step is a
         minimisation).
+    bound_active
+        DOFs of v held at a bound by the last v-step (0 if the mesh changed since).
     fallbacks
         Accelerated iterates rejected by the energy safeguard, and rejected Newton steps.
     newton_steps
@@ -103,6 +107,7 @@ class StepResult:
     history: list[dict] = field(default_factory=list)
     energies: list[float] = field(default_factory=list)
     energy_increases: int = 0
+    bound_active: int = 0
     fallbacks: int = 0
     newton_steps: int = 0
     escapes: int = 0
@@ -182,15 +187,19 @@ def _refine_by(
 
 
 def _half_step(
-    state: ATState, stage: str, adaptivity: AdaptivityParameters, result: StepResult
+    state: ATState,
+    half_steps: HalfStepSolvers,
+    stage: str,
+    adaptivity: AdaptivityParameters,
+    result: StepResult,
 ) -> None:
     """Solve one half-step; with Algorithm 2, refine and re-solve until the estimator ≤ TOL."""
     while True:
         crack = state.crack_set()
         if stage == "u":
-            state.solve_u()
+            half_steps.solve_u()
         else:
-            state.solve_v(crack)
+            half_steps.solve_v(crack)
         if adaptivity.adapt not in ("paper", "band"):
             return
         if not _refine_by(state, [estimate(state, stage, crack)], adaptivity, result, stage):
@@ -210,6 +219,7 @@ def alternating_minimization(
     adaptivity: AdaptivityParameters,
     monitor: HalfStepMonitor | None = None,
     band: CrackBand | None = None,
+    half_steps: HalfStepSolvers | None = None,
     strategy: NonlinearStrategy | None = None,
 ) -> StepResult:
     """Run Algorithm 1 or 2 from the current (u, v), with v = 0 on CR(t_k).
@@ -220,17 +230,17 @@ def alternating_minimization(
         Fields and operators; u already carries the Dirichlet data g(t_k) and ``v_prev`` is
         v(t_{k−1}), which defines CR(t_k) on every mesh of the step.
     solver
-        Stopping tolerance and iteration limit, and the nonlinear solver.
+        Stopping tolerance and iteration limit, the linear and the nonlinear solvers.
     adaptivity
         Refinement variant (``paper``, ``after``, ``fixed``), TOL, marking, element floor.
     monitor
         Called as ``monitor("u", state)`` and ``monitor("v", state)`` after each half-step.
     band
         With ``adapt="band"``: the crack band, resolved after every v-step.
-    strategy
-        The nonlinear solver (:mod:`ngat.strategies`), kept by the caller so that what it
-        holds (Newton's factorisation) serves every load step; default a new one for
-        ``solver.nonlinear``.
+    half_steps, strategy
+        The solvers of the half-steps (:mod:`ngat.halfsteps`) and the nonlinear solver
+        (:mod:`ngat.strategies`), kept by the caller so that their factorisations serve every
+        load step; default new ones as ``solver`` sets them.
 
     Returns
     -------
@@ -243,21 +253,21 @@ def alternating_minimization(
         If a half-step produces NaN or Inf.
     """
     result = StepResult()
+    half_steps = half_steps or HalfStepSolvers.from_parameters(state, solver)
     strategy = strategy or nonlinear_strategy(solver)
-    solves_before = state.linear_solves
-    cg_before = (len(state.cg_iterations), state.cg_not_converged)
     state.v_values[state.crack_set()] = 0.0
+    half_steps.start()
     strategy.start(state)
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec
         elements = state.arrays.ne
-        _half_step(state, "u", adaptivity, result)
+        _half_step(state, half_steps, "u", adaptivity, result)
         if not strategy.accept_u_step(state):
-            _half_step(state, "u", adaptivity, result)
+            _half_step(state, half_steps, "u", adaptivity, result)
         if monitor:
             monitor("u", state)
-        _half_step(state, "v", adaptivity, result)
+        _half_step(state, half_steps, "v", adaptivity, result)
         if monitor:
             monitor("v", state)
         band_rounds = band.refine(state) if band else 0
@@ -295,14 +305,21 @@ def alternating_minimization(
             solver.am_max_iter,
             result.change,
         )
-    statistics = strategy.statistics
-    result.fallbacks = statistics.fallbacks
-    result.newton_steps = statistics.newton_steps
-    result.escapes = statistics.escapes
-    result.linear_solves = state.linear_solves - solves_before + statistics.linear_solves
-    result.curvature_solves = statistics.curvature_solves
-    cg_counts = state.cg_iterations[cg_before[0] :]
-    result.cg_iterations = sum(cg_counts)
-    result.cg_max_iterations = max(cg_counts, default=0)
-    result.cg_not_converged = state.cg_not_converged - cg_before[1]
+    _record_statistics(result, half_steps, strategy)
     return result
+
+
+def _record_statistics(
+    result: StepResult, half_steps: HalfStepSolvers, strategy: NonlinearStrategy
+) -> None:
+    """Copy what the half-step solvers and the nonlinear strategy report into ``result``."""
+    linear, nonlinear = half_steps.statistics, strategy.statistics
+    result.bound_active = half_steps.bound_active
+    result.linear_solves = linear.solves + nonlinear.linear_solves
+    result.cg_iterations = sum(linear.cg_iterations)
+    result.cg_max_iterations = max(linear.cg_iterations, default=0)
+    result.cg_not_converged = linear.cg_not_converged
+    result.fallbacks = nonlinear.fallbacks
+    result.newton_steps = nonlinear.newton_steps
+    result.escapes = nonlinear.escapes
+    result.curvature_solves = nonlinear.curvature_solves

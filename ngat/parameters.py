@@ -197,7 +197,7 @@ class SolverParameters:
         Change ‖v^n − v^{n−1}‖_∞ of an alternating-minimisation iteration below which Newton
         steps are tried (``nonlinear="newton"``).
     bounded_v
-        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.state.ATState.solve_v`).
+        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.halfsteps.HalfStepSolvers.solve_v`).
     on_problem
         ``"warn"``: problems found by :mod:`ngat.diagnostics` are logged and recorded;
         ``"error"``: the run stops at the first one.
