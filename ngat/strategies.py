@@ -34,6 +34,7 @@ __all__ = [
     "NonlinearStrategy",
     "NonlinearStatistics",
     "AlternatingMinimization",
+    "Accelerated",
     "OverRelaxed",
     "Anderson",
     "NewtonSwitch",
@@ -278,10 +279,10 @@ class NewtonSwitch:
     After an iteration with ‖v^n − v^{n−1}‖_∞ below ``switch`` whose rate predicts more than
     :data:`NEWTON_COST` further iterations (:func:`remaining_iterations`), a Newton step on the
     coupled system (:class:`ngat.newton.NewtonSolver`), or a step along negative curvature, is
-    tried from the iterate. A rejected step halves the threshold (Newton is too far from a
-    minimiser: wait until the iteration has halved its change); an accepted one restarts the
-    acceleration's history. The Newton solver belongs to the state it was made for and is kept
-    across load steps.
+    tried from the iterate. A rejected step lowers the threshold to half the current change
+    (Newton is too far from a minimiser: wait until the iteration has halved it); an accepted
+    one restarts the acceleration's history. The Newton solver is kept across load steps as
+    long as the state is the same.
 
     Parameters
     ----------
