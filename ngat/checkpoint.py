@@ -6,9 +6,9 @@ checkpoint, complete. It holds the state after the last finished step, and nothi
 with the number of steps: the step, the summary entries a resumed run carries on
 (:data:`CARRIED`), the nodal values of u, v and the previous step's v (which defines CR), the
 lagged Cholesky factorisations' matrix values (they outlive a load step, see
-:meth:`ngat.state.ATState.solver_state`) and the mesh. The records of the finished steps are the
-rows of ``energies.csv``, written (and synced) before the checkpoint: a resumed run reads them
-back from there (:func:`restore_energies`).
+:meth:`ngat.halfsteps.HalfStepSolvers.solver_state`) and the mesh. The records of the finished
+steps are the rows of ``energies.csv``, written (and synced) before the checkpoint: a resumed
+run reads them back from there (:func:`restore_energies`).
 
 The mesh is stored as the list of its refinements — the marked elements of every
 ``mesh.Refine()`` — plus its vertex coordinates as a check. A resumed run meshes the scene again
@@ -31,6 +31,7 @@ from typing import Any
 import ngsolve
 import numpy as np
 
+from ngat.halfsteps import HalfStepSolvers
 from ngat.output import (
     CHECKPOINT,
     OutputError,
@@ -87,7 +88,7 @@ class Checkpoint:
     coords
         Vertex coordinates of the mesh (checked after the replay).
     solvers
-        :meth:`ngat.state.ATState.solver_state`.
+        :meth:`ngat.halfsteps.HalfStepSolvers.solver_state`.
     """
 
     step: int
@@ -109,6 +110,7 @@ def _plain(value: Any) -> Any:
 def save_checkpoint(
     folder: Path,
     state: ATState,
+    half_steps: HalfStepSolvers,
     step: int,
     summary: dict[str, Any],
 ) -> None:
@@ -119,7 +121,9 @@ def save_checkpoint(
     folder
         Results folder.
     state
-        Fields, mesh, refinement list and solvers after the step.
+        Fields, mesh and refinement list after the step.
+    half_steps
+        The half-steps' solvers after the step.
     step
         Index of the step just finished (its row is already in ``energies.csv``).
     summary
@@ -146,7 +150,7 @@ def save_checkpoint(
         "coords": state.mesh.ngmesh.Coordinates(),
         "marks": np.concatenate(marks) if marks else np.zeros(0, dtype=np.int64),
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
-        **{f"solver_{key}": value for key, value in state.solver_state().items()},
+        **{f"solver_{key}": value for key, value in half_steps.solver_state().items()},
     }
     with writing(folder), atomic_file(Path(folder) / CHECKPOINT) as f:
         np.savez(f, **arrays)
@@ -281,13 +285,13 @@ def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
         )
 
 
-def restore_state(state: ATState, checkpoint: Checkpoint) -> None:
+def restore_state(state: ATState, half_steps: HalfStepSolvers, checkpoint: Checkpoint) -> None:
     """Set u, v, v(t_{k−1}), the refinement list and the factorisations from the checkpoint."""
     state.u_values[:] = checkpoint.fields["u"]
     state.v_values[:] = checkpoint.fields["v"]
     state.v_prev.vec.FV().NumPy()[:] = checkpoint.fields["v_prev"]
     state.refinements[:] = [np.asarray(m) for m in checkpoint.refinements]
-    state.restore_solver_state(checkpoint.solvers)
+    half_steps.restore_solver_state(checkpoint.solvers)
 
 
 def restore_energies(folder: Path, step: int) -> list[dict[str, Any]]:

@@ -6,7 +6,8 @@ The surface term of I_j is G_c ∫ γ(v, ∇v), a regularised crack length:
   any load: v < 1 wherever W > 0.
 - ``at1``: γ = 3/(8ε) (1 − v) + (3ε/8) |∇v|², a crack density linear in 1 − v. Below the
   critical energy density W_c = 3 G_c/(16ε) the minimiser keeps v = 1 (an elastic phase);
-  the v-step needs the bound v ≤ 1, which the bounded v-step has (:meth:`ATState.solve_v`).
+  the v-step needs the bound v ≤ 1, which the bounded v-step has
+  (:meth:`ngat.halfsteps.HalfStepSolvers.solve_v`).
 
 Both are normalised so that the optimal one-dimensional profile of a crack costs G_c per unit
 length (AT1 is that of Tanné et al., J. Mech. Phys. Solids 110 (2018), with ℓ = ε; its

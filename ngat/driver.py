@@ -36,6 +36,7 @@ from ngat.checkpoint import (
 )
 from ngat.crack import check_slits, connects, crack_tips
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
+from ngat.halfsteps import HalfStepSolvers
 from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import OutputError, ResultsWriter, vtu_name
@@ -43,6 +44,7 @@ from ngat.parameters import Parameters
 from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
+from ngat.strategies import nonlinear_strategy
 from ngat.threads import FixedThreads
 from ngat.timing import PhaseTimer
 
@@ -199,15 +201,15 @@ def _run_locked(
             if checkpoint is not None:
                 replay_refinements(mesh, checkpoint)
         solver = parameters.solver
-        state = ATState(
-            mesh, parameters.model, scene.loads, scene.crack, timer, solver.max_cg,
-            solver.bounded_v, solver.linear_solver,
-        )  # fmt: skip
+        state = ATState(mesh, parameters.model, scene.loads, scene.crack, timer)
+        # One set of solvers for the run: their factorisations outlive a load step.
+        half_steps = HalfStepSolvers.from_parameters(state, solver)
+        strategy = nonlinear_strategy(solver)
         check_slits(mesh, scene.slits, scene.name)
         if parameters.adaptivity.adapt == "fixed" and parameters.adaptivity.resolve_eps:
             check_fixed_mesh(state, scene.slits, parameters.model.eps)
         if checkpoint is not None:
-            restore_state(state, checkpoint)
+            restore_state(state, half_steps, checkpoint)
         result.state = state
         band = crack_band(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
@@ -219,7 +221,7 @@ def _run_locked(
             predicted = band.refine(state) if band else 0
             try:
                 step = alternating_minimization(
-                    state, parameters.solver, parameters.adaptivity, monitor, band
+                    state, solver, parameters.adaptivity, monitor, band, half_steps, strategy
                 )
             except ConvergenceError as error:
                 diagnostics.report("nan", str(error), k, float(t), raise_now=False)
@@ -235,7 +237,7 @@ def _run_locked(
                 nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),
                 cracked_vertices=int(crack.sum()),
-                v_bound_active=state.bound_active,
+                v_bound_active=step.bound_active,
                 linear_solves=step.linear_solves,
                 cg_iterations=step.cg_iterations,
                 cg_max_iterations=step.cg_max_iterations,
@@ -261,7 +263,7 @@ def _run_locked(
                 summary["timing"] = timer.summary()
                 summary["diagnostics"] = diagnostics.summary()
                 with timer("checkpoint"):
-                    save_checkpoint(folder, state, k, summary)
+                    save_checkpoint(folder, state, half_steps, k, summary)
                 # A step counts as finished once its checkpoint is written (--resume goes on
                 # there); the records of a failed write do not hold it.
                 result.records.append(record)

@@ -238,7 +238,8 @@ class VolumetricDeviatoricSplit(PlaneElasticity):
     is constant per element, so the split is elementwise: the u-step's element matrix is
     c_T K_dev + (c_T if tr ε_T ≥ 0 else 1) K_vol, with K_vol = |T| (K/2) div φ_a div φ_b and
     K_dev the rest of the element matrix. The u-step's energy is then piecewise quadratic and
-    convex, and :meth:`ngat.state.ATState.solve_u` minimises it by a semismooth Newton method.
+    convex, and :meth:`ngat.halfsteps.HalfStepSolvers.solve_u` minimises it by a semismooth
+    Newton method.
 
     Parameters
     ----------

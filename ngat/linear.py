@@ -1,4 +1,4 @@
-"""Linear solves of the half-steps: sparse Cholesky, or CG with NGSolve's h1amg preconditioner.
+"""Linear solvers of one matrix: sparse Cholesky, or CG with NGSolve's h1amg preconditioner.
 
 Between two alternating-minimisation iterations the matrices of a_j and b_j change only where v
 or ∇u changed, and less and less as the iteration converges. :class:`LaggedCholesky` therefore
@@ -12,6 +12,7 @@ preconditioned by NGSolve's algebraic multigrid ``h1amg``, rebuilt for every new
 h1amg preconditioner coarsens by weights computed from the element matrices, which it only sees
 during ``BilinearForm.Assemble()``, and it takes its free DOFs from the form's space; so each
 refresh writes the free DOFs into a P1 space reserved for the solver and assembles the form.
+Which solver serves which half-step, and when, is :class:`ngat.halfsteps.HalfStepSolvers`.
 """
 
 from __future__ import annotations
@@ -83,9 +84,9 @@ class AMGConjugateGradient:
     the same operator as the direct solver's); the preconditioner is built on the NGSolve
     assembly of ``form``, which equals it to round-off (``tests/test_forms.py``). A solve that
     stops at ``maxiter`` before reducing the preconditioned residual by ``tol`` keeps its last
-    iterate, logs a warning and sets :attr:`converged` to ``False``; the state counts such
-    solves and the run's diagnostics report them as ``linear-not-converged``
-    (:mod:`ngat.diagnostics`).
+    iterate, logs a warning and sets :attr:`converged` to ``False``; the half-step solvers count
+    such solves (:class:`ngat.halfsteps.LinearStatistics`) and the run's diagnostics report them
+    as ``linear-not-converged`` (:mod:`ngat.diagnostics`).
 
     Parameters
     ----------

@@ -8,55 +8,41 @@ Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ f
 is Algorithm 2 with the crack band resolved after every v-step (:class:`ngat.band.CrackBand`):
 an iteration that refined the band does not count as converged.
 
-``nonlinear`` selects how the iterates are formed, all with the same stopping test on an
-alternating-minimisation iteration: plain (the paper), over-relaxed or Anderson-accelerated
-(:class:`Accelerator`, with an energy safeguard), and with ``newton``/``anderson-newton`` a
-Newton step on the coupled system (:class:`ngat.newton.NewtonSolver`, or a step along negative
-curvature) after an iteration with ‖v^n − v^{n−1}‖_∞ < ``newton_switch`` whose rate predicts
-more than ``NEWTON_COST`` further iterations (:func:`remaining_iterations`).
+The loop is the same for every ``nonlinear`` solver, all with the same stopping test on an
+alternating-minimisation iteration; what a solver adds between the half-steps (acceleration,
+Newton steps) is a strategy of :mod:`ngat.strategies`, taken from
+:func:`ngat.strategies.nonlinear_strategy`, and the half-steps themselves are solved by
+:class:`ngat.halfsteps.HalfStepSolvers`. The step's :class:`StepResult` gathers the statistics
+that both report.
 """
 
 from __future__ import annotations
 
 import logging
-import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from ngsolve import GridFunction
 
 from ngat.band import CrackBand
 from ngat.estimators import mu_estimator, nu_estimator
-from ngat.newton import NewtonSolver
+from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
 from ngat.state import ATState
+from ngat.strategies import NonlinearStrategy, nonlinear_strategy
 
 __all__ = [
     "StepResult",
     "alternating_minimization",
-    "Accelerator",
     "estimate",
     "ConvergenceError",
-    "remaining_iterations",
     "tolerance",
 ]
 
 log = logging.getLogger(__name__)
 
 HalfStepMonitor = Callable[[str, ATState], None]
-
-_newton_solvers: weakref.WeakKeyDictionary[ATState, NewtonSolver] = weakref.WeakKeyDictionary()
-"""One Newton solver per state, so that its graph and factorisation outlive a load step."""
-
-NEWTON_COST = 2
-"""Alternating-minimisation iterations that a Newton attempt costs: its factorisation of the
-coupled 2n × 2n system is about three half-step factorisations (1.5 iterations), and the up to
-ten back-solves of the search for negative curvature cost about an eighth of a factorisation
-each (0.13 s against 1.05 s at 122k vertices). Newton is tried only where more alternating
-minimisation iterations than this remain."""
-
 
 ROUND_OFF_TOL = 1e-6
 """Smallest TOL of the relative form: estimators of fields that are round-off are not refined."""
@@ -89,6 +75,8 @@ class StepResult:
     energy_increases
         Iterations on an unchanged mesh that increased I_j (should be 0: each half-step is a
         minimisation).
+    bound_active
+        DOFs of v held at a bound by the last v-step (0 if the mesh changed since).
     fallbacks
         Accelerated iterates rejected by the energy safeguard, and rejected Newton steps.
     newton_steps
@@ -119,6 +107,7 @@ class StepResult:
     history: list[dict] = field(default_factory=list)
     energies: list[float] = field(default_factory=list)
     energy_increases: int = 0
+    bound_active: int = 0
     fallbacks: int = 0
     newton_steps: int = 0
     escapes: int = 0
@@ -198,15 +187,19 @@ def _refine_by(
 
 
 def _half_step(
-    state: ATState, stage: str, adaptivity: AdaptivityParameters, result: StepResult
+    state: ATState,
+    half_steps: HalfStepSolvers,
+    stage: str,
+    adaptivity: AdaptivityParameters,
+    result: StepResult,
 ) -> None:
     """Solve one half-step; with Algorithm 2, refine and re-solve until the estimator ≤ TOL."""
     while True:
         crack = state.crack_set()
         if stage == "u":
-            state.solve_u()
+            half_steps.solve_u()
         else:
-            state.solve_v(crack)
+            half_steps.solve_v(crack)
         if adaptivity.adapt not in ("paper", "band"):
             return
         if not _refine_by(state, [estimate(state, stage, crack)], adaptivity, result, stage):
@@ -226,6 +219,8 @@ def alternating_minimization(
     adaptivity: AdaptivityParameters,
     monitor: HalfStepMonitor | None = None,
     band: CrackBand | None = None,
+    half_steps: HalfStepSolvers | None = None,
+    strategy: NonlinearStrategy | None = None,
 ) -> StepResult:
     """Run Algorithm 1 or 2 from the current (u, v), with v = 0 on CR(t_k).
 
@@ -235,13 +230,17 @@ def alternating_minimization(
         Fields and operators; u already carries the Dirichlet data g(t_k) and ``v_prev`` is
         v(t_{k−1}), which defines CR(t_k) on every mesh of the step.
     solver
-        Stopping tolerance and iteration limit.
+        Stopping tolerance and iteration limit, the linear and the nonlinear solvers.
     adaptivity
         Refinement variant (``paper``, ``after``, ``fixed``), TOL, marking, element floor.
     monitor
         Called as ``monitor("u", state)`` and ``monitor("v", state)`` after each half-step.
     band
         With ``adapt="band"``: the crack band, resolved after every v-step.
+    half_steps, strategy
+        The solvers of the half-steps (:mod:`ngat.halfsteps`) and the nonlinear solver
+        (:mod:`ngat.strategies`), kept by the caller so that their factorisations serve every
+        load step; default new ones as ``solver`` sets them.
 
     Returns
     -------
@@ -254,27 +253,21 @@ def alternating_minimization(
         If a half-step produces NaN or Inf.
     """
     result = StepResult()
-    solves_before = state.linear_solves, state.curvature_solves
-    cg_before = (len(state.cg_iterations), state.cg_not_converged)
+    half_steps = half_steps or HalfStepSolvers.from_parameters(state, solver)
+    strategy = strategy or nonlinear_strategy(solver)
     state.v_values[state.crack_set()] = 0.0
-    accelerator = None
-    if solver.nonlinear in ("overrelaxed", "anderson", "anderson-newton"):
-        accelerator = Accelerator(solver)
-    newton = None
-    if solver.nonlinear in ("newton", "anderson-newton"):
-        newton = _newton_solvers.setdefault(state, NewtonSolver(state))
-        newton.restart()
-    newton_below, previous_change = solver.newton_switch, np.inf
+    half_steps.start()
+    strategy.start(state)
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec
         elements = state.arrays.ne
-        _half_step(state, "u", adaptivity, result)
-        if accelerator and not accelerator.safeguard(state, result):
-            _half_step(state, "u", adaptivity, result)
+        _half_step(state, half_steps, "u", adaptivity, result)
+        if not strategy.accept_u_step(state):
+            _half_step(state, half_steps, "u", adaptivity, result)
         if monitor:
             monitor("u", state)
-        _half_step(state, "v", adaptivity, result)
+        _half_step(state, half_steps, "v", adaptivity, result)
         if monitor:
             monitor("v", state)
         band_rounds = band.refine(state) if band else 0
@@ -286,8 +279,7 @@ def alternating_minimization(
                  "estimate": 0.0, "new_elements": state.arrays.ne}
             )  # fmt: skip
         energy = state.energies()["total"]
-        if accelerator:
-            accelerator.step(state)
+        strategy.next_iterate(state)
         if result.energies and elements == state.arrays.ne:
             if energy > result.energies[-1] * (1 + 1e-10) + 1e-14:
                 result.energy_increases += 1
@@ -304,22 +296,8 @@ def alternating_minimization(
             result.converged = True
             result.reason = "converged"
             break
-        remaining = remaining_iterations(change, previous_change, solver.am_tol)
-        previous_change = change
-        if newton and change < newton_below and remaining > NEWTON_COST:
-            previous_change = np.inf  # the next ratio would measure the Newton step
-            ceiling = accelerator.plain_energy if accelerator and accelerator.has_plain else np.inf
-            outcome = newton.step(state.crack_set(), ceiling)
-            if outcome:
-                result.energies.append(state.energies()["total"])
-                if accelerator:
-                    accelerator.restart()
-                result.newton_steps += outcome == "newton"
-                result.escapes += outcome == "escape"
-            else:
-                # Too far from a minimiser for Newton: wait until the iteration has halved.
-                result.fallbacks += 1
-                newton_below = change / 2
+        if strategy.after_iteration(state, float(change)):
+            result.energies.append(state.energies()["total"])
     else:
         result.reason = "iteration limit"
         log.warning(
@@ -327,101 +305,21 @@ def alternating_minimization(
             solver.am_max_iter,
             result.change,
         )
-    result.linear_solves = state.linear_solves - solves_before[0]
-    result.curvature_solves = state.curvature_solves - solves_before[1]
-    cg_counts = state.cg_iterations[cg_before[0] :]
-    result.cg_iterations = sum(cg_counts)
-    result.cg_max_iterations = max(cg_counts, default=0)
-    result.cg_not_converged = state.cg_not_converged - cg_before[1]
+    _record_statistics(result, half_steps, strategy)
     return result
 
 
-def remaining_iterations(change: float, previous: float, tol: float) -> float:
-    """Estimate the iterations until ‖v^n − v^{n−1}‖_∞ < tol from the last contraction.
-
-    Alternating minimisation converges linearly near a minimiser, with the ratio of successive
-    changes as its rate ρ: about log(tol / change) / log ρ more iterations; infinitely many if
-    the change did not shrink; 0 without a previous change (``previous = inf``), which is not
-    yet evidence of slow convergence.
-    """
-    if not np.isfinite(previous):
-        return 0.0
-    ratio = change / previous
-    if ratio >= 1:
-        return np.inf
-    if change <= tol:
-        return 0.0
-    return float(np.log(tol / change) / np.log(ratio))
-
-
-class Accelerator:
-    """Over-relaxation or Anderson acceleration of the alternating-minimisation map v ↦ G(v).
-
-    G is one u-step followed by one v-step. After the v-step, :meth:`step` replaces the plain
-    iterate G(v) by v_old + ω(G(v) − v_old) (over-relaxation) or by the Anderson combination
-    of the last ``depth`` iterates, projected to 0 ≤ v ≤ 1 (≤ v(t_{k−1}) for pointwise
-    irreversibility) and v = 0 on CR. The v-step minimises I_j(u^n, ·) exactly, so the
-    accelerated v cannot be judged before the next u-step: :meth:`safeguard` compares
-    I_j(u^{n+1}, v_acc) with I_j(u^n, G(v)) and, if the energy went up, restores the plain
-    iterate (the caller repeats the u-step) and clears the history. The plain iterate is kept
-    in a GridFunction that ``mesh.Refine()`` prolongates, so the comparison also holds when the
-    u-step refined the mesh (bisection with the vertex rule does not raise I_j). The sequence of
-    accepted energies therefore never increases, as for plain alternating minimisation.
-    """
-
-    def __init__(self, solver: SolverParameters):
-        self.kind = "anderson" if solver.nonlinear == "anderson-newton" else solver.nonlinear
-        self.omega = solver.omega
-        self.depth = solver.anderson_depth
-        self.iterates: list[np.ndarray] = []  # G(x_k)
-        self.residuals: list[np.ndarray] = []  # G(x_k) − x_k
-        self.plain: GridFunction | None = None
-        self.has_plain = False
-        self.plain_energy = np.inf
-
-    def restart(self) -> None:
-        """Forget the history (the iterate was changed by another method)."""
-        self.iterates, self.residuals, self.has_plain = [], [], False
-
-    def step(self, state: ATState) -> None:
-        """Replace the plain iterate in ``state.v`` by the accelerated one."""
-        v = state.v_values
-        v_old = state.v_iter.vec.FV().NumPy()
-        if len(v_old) != len(v) or (self.iterates and len(self.iterates[0]) != len(v)):
-            self.restart()
-            return
-        if self.plain is None:
-            self.plain = GridFunction(state.fes, autoupdate=True)
-        self.plain.vec.data = state.v.vec
-        self.has_plain = True
-        self.plain_energy = state.energies()["total"]
-        if self.kind == "overrelaxed":
-            candidate = v_old + self.omega * (v - v_old)
-        else:
-            self.iterates.append(v.copy())
-            self.residuals.append(v - v_old)
-            self.iterates = self.iterates[-(self.depth + 1) :]
-            self.residuals = self.residuals[-(self.depth + 1) :]
-            if len(self.residuals) < 2:
-                return
-            d_res = np.diff(np.array(self.residuals), axis=0)
-            d_it = np.diff(np.array(self.iterates), axis=0)
-            gamma = np.linalg.lstsq(d_res.T, self.residuals[-1], rcond=None)[0]
-            candidate = v - d_it.T @ gamma
-        upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
-        np.clip(candidate, 0.0, upper, out=candidate)
-        candidate[state.crack_set()] = 0.0
-        v[:] = candidate
-
-    def safeguard(self, state: ATState, result: StepResult) -> bool:
-        """After the u-step: keep the accelerated v if I_j did not increase; else restore.
-
-        Returns ``False`` when the plain iterate was restored (the u-step must be repeated).
-        """
-        if not self.has_plain or state.energies()["total"] <= self.plain_energy:
-            return True
-        state.v.vec.data = self.plain.vec
-        state.v_iter.vec.data = self.plain.vec
-        self.restart()
-        result.fallbacks += 1
-        return False
+def _record_statistics(
+    result: StepResult, half_steps: HalfStepSolvers, strategy: NonlinearStrategy
+) -> None:
+    """Copy what the half-step solvers and the nonlinear strategy report into ``result``."""
+    linear, nonlinear = half_steps.statistics, strategy.statistics
+    result.bound_active = half_steps.bound_active
+    result.linear_solves = linear.solves + nonlinear.linear_solves
+    result.cg_iterations = sum(linear.cg_iterations)
+    result.cg_max_iterations = max(linear.cg_iterations, default=0)
+    result.cg_not_converged = linear.cg_not_converged
+    result.fallbacks = nonlinear.fallbacks
+    result.newton_steps = nonlinear.newton_steps
+    result.escapes = nonlinear.escapes
+    result.curvature_solves = nonlinear.curvature_solves

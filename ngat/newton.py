@@ -19,7 +19,7 @@ where the gradient pushes v out of [0, 1] (a projected Newton method), then back
 P(w + s δ), s = 1, ½, ¼, … until I_j decreases by the Armijo condition. Away from a minimiser
 the Hessian may be indefinite and δ no descent direction: the step is then rejected and the
 caller continues with alternating minimisation, so Newton starts from an
-alternating-minimisation iterate (:func:`ngat.minimization.alternating_minimization`).
+alternating-minimisation iterate (:class:`ngat.strategies.NewtonSwitch`).
 
 Newton is attracted by saddles of I_j as much as by minimisers, and the quasi-static path
 passes near saddles exactly where the crack is about to move. Before a Newton step,
@@ -94,6 +94,11 @@ class NewtonSolver:
     certified : float
         ‖δ_v‖∞ of the last full Newton step from a point without negative curvature; a
         shorter next step skips the search (0 when there is none).
+    solves : int
+        Newton systems solved since the last :meth:`restart`.
+    curvature_solves : int
+        Further solves with a factorisation already computed, in the search for negative
+        curvature (:meth:`negative_curvature`), since the last :meth:`restart`.
     """
 
     def __init__(
@@ -115,6 +120,8 @@ class NewtonSolver:
         self.lanczos_steps = lanczos_steps
         self.escape_size = escape_size
         self.certified = 0.0
+        self.solves = 0
+        self.curvature_solves = 0
         self._arrays = None
 
     def _setup(self) -> None:
@@ -268,7 +275,7 @@ class NewtonSolver:
             return ""
         with self.state.timer("solve"):
             delta = self._apply_inverse(residual)
-            self.state.linear_solves += 1
+            self.solves += 1
             size = np.max(np.abs(delta[len(u) :]))
             found = None
             if size >= self.certified:
@@ -298,8 +305,9 @@ class NewtonSolver:
         return "newton" if scale else ""
 
     def restart(self) -> None:
-        """Forget the last check for negative curvature (a new load step begins)."""
+        """Forget the last check for negative curvature and count from zero (a new load step)."""
         self.certified = 0.0
+        self.solves = self.curvature_solves = 0
 
     def _apply_inverse(self, x: np.ndarray) -> np.ndarray:
         """Return H⁻¹ x with the current factorisation."""
@@ -316,7 +324,7 @@ class NewtonSolver:
         (‖x‖ = 1). Near a saddle the negative eigenvalue λ of H is small, so 1/λ is an extreme
         eigenvalue of H⁻¹, which Lanczos finds first. Started from the Newton system's right
         side, whose solve is the first step; every further step is one solve with the
-        factorisation at hand, counted in ``state.curvature_solves``.
+        factorisation at hand, counted in :attr:`curvature_solves`.
 
         Parameters
         ----------
@@ -338,7 +346,7 @@ class NewtonSolver:
         for k in range(steps):
             if k:
                 images[k] = self._apply_inverse(basis[k])
-                self.state.curvature_solves += 1
+                self.curvature_solves += 1
             diagonal[k] = basis[k] @ images[k]
             ritz, vectors = eigh_tridiagonal(diagonal[: k + 1], offdiagonal[:k])
             if ritz[0] < -1e-8 * np.max(np.abs(ritz)):

@@ -155,7 +155,8 @@ class ModelParameters:
 
 
 NONLINEAR_SOLVERS = ("am", "overrelaxed", "anderson", "newton", "anderson-newton")
-"""The solvers of one load step (:func:`ngat.minimization.alternating_minimization`)."""
+"""The solvers of one load step, each a strategy of :mod:`ngat.strategies`
+(:data:`ngat.strategies.STRATEGIES`)."""
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ class SolverParameters:
         ``linear-not-converged``, :mod:`ngat.diagnostics`). Newton steps solve their coupled
         system directly in either case.
     nonlinear
-        Solver of one load step (:mod:`ngat.minimization`): ``"am"`` plain alternating
+        Solver of one load step (:mod:`ngat.strategies`): ``"am"`` plain alternating
         minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
         ``"anderson"`` Anderson acceleration of the alternating-minimisation map; both
         accelerated steps fall back to the plain one whenever it has lower energy;
@@ -196,7 +197,7 @@ class SolverParameters:
         Change ‖v^n − v^{n−1}‖_∞ of an alternating-minimisation iteration below which Newton
         steps are tried (``nonlinear="newton"``).
     bounded_v
-        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.state.ATState.solve_v`).
+        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.halfsteps.HalfStepSolvers.solve_v`).
     on_problem
         ``"warn"``: problems found by :mod:`ngat.diagnostics` are logged and recorded;
         ``"error"``: the run stops at the first one.

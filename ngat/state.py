@@ -1,12 +1,13 @@
-"""The discrete state on one mesh: P1 fields u, v, the previous step's v, and the two half-steps.
+"""The discrete state on one mesh: P1 fields u, v, the previous step's v, and their operators.
 
-:class:`ATState` owns the mesh, the P1 space and the GridFunctions (all ``autoupdate=True``, so
-``mesh.Refine()`` prolongates them exactly), the Dirichlet and crack DOF masks and the two
-linear solvers. The u-step solves a_j(v; u, φ) = 0 with u = g(t_k) on Ω_D, the v-step solves
-b_j(u; v, ψ) = 0 with v = 0 on CR(t_k) (paper, Algorithm 1, steps 2.1 and 2.2). Per mesh, the
-matrix graph is built once; per solve only the values are rewritten and the sparse Cholesky
-factorisation is refreshed with ``Inverse.Update()``, which keeps the symbolic analysis, or, with
-``linear_solver="cg-h1amg"``, the h1amg preconditioner is rebuilt (:mod:`ngat.linear`).
+:class:`ATState` owns the mesh, the P1 spaces and the GridFunctions (all ``autoupdate=True``, so
+``mesh.Refine()`` prolongates them exactly), the Dirichlet and crack DOF masks, the loads, and
+the matrices of the two half-steps, a_j(v; u, φ) of the u-step and b_j(u; v, ψ) of the v-step
+(paper, Algorithm 1, steps 2.1 and 2.2). Per mesh, each matrix graph is built once by one
+NGSolve assembly; :meth:`ATState.assemble_a` and :meth:`ATState.assemble_b` then rewrite only
+the values in place, from the vectorised element assembly of :mod:`ngat.forms`. The state
+evaluates I_j (eq. 7), the reaction forces and the mesh measures; how the half-steps are solved
+is :mod:`ngat.halfsteps`, and the nonlinear solvers of a load step are :mod:`ngat.strategies`.
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule
 from ngat.elasticity import Elasticity, elasticity
 from ngat.estimators import EdgeTopology
 from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
-from ngat.linear import AMGConjugateGradient, LaggedCholesky
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
 
@@ -95,27 +95,6 @@ class ATState:
         of the vertex coordinates (nv, 2) returning a boolean mask.
     timer
         Accumulates wall time per phase.
-    max_cg
-        CG iterations accepted with a stale Cholesky factor before it is refreshed
-        (:class:`ngat.linear.LaggedCholesky`); 0 refactorises at every solve.
-    bounded_v
-        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`solve_v`); ``False`` solves the
-        unconstrained linear system only (the paper's v-step, exact under Hypothesis A).
-    linear_solver
-        ``"direct"``: sparse Cholesky (:class:`ngat.linear.LaggedCholesky`); ``"cg-h1amg"``:
-        CG with NGSolve's h1amg preconditioner (:class:`ngat.linear.AMGConjugateGradient`).
-
-    Attributes
-    ----------
-    linear_solves : int
-        Linear systems solved so far (each with a new matrix or a lagged factorisation).
-    curvature_solves : int
-        Extra solves with the Newton factorisation already computed (Lanczos steps of
-        :meth:`ngat.newton.NewtonSolver.negative_curvature`).
-    cg_iterations : list of int
-        CG iterations of every ``cg-h1amg`` solve so far.
-    cg_not_converged : int
-        ``cg-h1amg`` solves that stopped at the iteration cap above the tolerance.
     """
 
     def __init__(
@@ -125,9 +104,6 @@ class ATState:
         loads: Mapping[str, Load],
         crack: str | Callable[[np.ndarray], np.ndarray] | None = None,
         timer: PhaseTimer | None = None,
-        max_cg: int = 0,
-        bounded_v: bool = True,
-        linear_solver: str = "direct",
     ):
         if not loads:
             raise SceneError("the scene has no Dirichlet region: give at least one load")
@@ -143,13 +119,6 @@ class ATState:
         self.mesh = mesh
         self.model = model
         self.timer = timer or PhaseTimer()
-        self.max_cg = max_cg
-        self.bounded_v = bounded_v
-        self.linear_solver = linear_solver
-        self.linear_solves = 0
-        self.curvature_solves = 0
-        self.cg_iterations: list[int] = []
-        self.cg_not_converged = 0
         self.t = Parameter(0.0)
         self.crack = crack
         self.elasticity = elasticity(model.model, model.young, model.poisson, model.split)
@@ -228,13 +197,6 @@ class ATState:
                 )
                 self.initial_crack = np.array(self.fes.GetDofs(region), dtype=bool)
             self._edges = None
-            self._a_solver: LaggedCholesky | AMGConjugateGradient | None = None
-            self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
-            self._residual = self.a_matrix.CreateColVector()
-            self._correction = self.a_matrix.CreateColVector()
-            self._v_residual = self.b_matrix.CreateColVector()
-            self._v_step = self.b_matrix.CreateColVector()
-            self.bound_active = 0
 
     def _load(self, name: str, value) -> tuple[list[int], ngsolve.CoefficientFunction]:
         """Return the components a region's load fixes and the load as one CoefficientFunction.
@@ -314,7 +276,7 @@ class ATState:
 
         With ``irreversibility="crtol"`` CR(t_k) = {v(t_{k-1}) < CRTOL} (paper, Section 1.2);
         with ``"pointwise"`` irreversibility is the bound v ≤ v(t_{k−1}) of eq. (3) instead
-        (:meth:`solve_v`) and only the scene's crack is fixed.
+        (:meth:`ngat.halfsteps.HalfStepSolvers.solve_v`) and only the scene's crack is fixed.
         """
         if self.model.irreversibility == "pointwise":
             return self.initial_crack.copy()
@@ -360,7 +322,7 @@ class ATState:
                 total = np.bincount(vertices, weights=component, minlength=nv)
                 out[i * nv : (i + 1) * nv][dofs] = total[dofs] / count[dofs]
 
-    # -- half-steps -------------------------------------------------------------------------
+    # -- in-place assembly ------------------------------------------------------------------
     def u_matrix_values(self) -> np.ndarray:
         """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).
 
@@ -371,159 +333,19 @@ class ATState:
         weights = self.elasticity.weights(self.arrays, self.u_values, c)
         return self.assembler.weighted_values(weights, self.stiffness_parts)
 
-    def solve_u(self, max_iterations: int = 50) -> None:
-        """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1).
+    def assemble_a(self) -> None:
+        """Write a_j(v; ·, ·) at the current fields into ``a_matrix``, in place."""
+        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
 
-        Without an energy split this is one linear solve. With one, I_j(·, v) is convex and
-        piecewise quadratic (the volumetric part of an element degrades only in tension), and
-        a semismooth Newton method minimises it: solve with the element matrices of the current
-        tension pattern, halve the step while the energy would rise, and stop when the pattern
-        no longer changes (the minimiser of that quadratic piece is then the minimiser).
+    def assemble_b(self) -> None:
+        """Write b_j(u; ·, ·) at the current u into ``b_matrix``, in place.
+
+        b_j of Definition 2 with W⁺(u)/G_c in place of |∇u|² and the model's crack density
+        (:mod:`ngat.crack_density`).
         """
-        u = self.u_values
-        for _ in range(max_iterations):
-            tension = self.elasticity.tension(self.arrays, u)
-            with self.timer("assembly"):
-                self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
-            with self.timer("solve"):
-                self._a_solver = self._refreshed(self._a_solver, "u", ~self.dirichlet)
-                self._residual.data = -1 * (self.a_matrix * self.u.vec)
-                self._solve(self._a_solver)
-            if tension is None:
-                self.u.vec.data += self._correction
-                return
-            step = self._correction.FV().NumPy().copy()
-            if self._split_step(step, tension):
-                return
-        log.warning("split u-step: tension pattern not settled after %d iterations", max_iterations)
-
-    def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
-        """Move u along a semismooth Newton step; return whether the u-step has converged."""
-        u = self.u_values
-        start, scale = self._bulk_energy(u), 1.0
-        for _ in range(30):
-            trial = u + scale * step
-            if self._bulk_energy(trial) <= start:
-                break
-            scale /= 2
-        u[:] = trial
-        settled = np.array_equal(self.elasticity.tension(self.arrays, u), tension)
-        return scale == 1.0 and settled or np.abs(scale * step).max() <= 1e-14 * np.abs(u).max()
-
-    def _bulk_energy(self, u: np.ndarray) -> float:
-        """Return ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) at the current v."""
-        arrays, density = self.arrays, self.elasticity
-        c = self.assembler.square_mean(self.v_values) + self.model.eta
-        return float(
-            np.dot(arrays.area, c * density.degraded_density(arrays, u))
-            + np.dot(arrays.area, density.intact_density(arrays, u))
-        )
-
-    def solve_v(self, crack: np.ndarray) -> None:
-        """v-step: minimise I_j(u, ·) over X_{j,CR} with 0 ≤ v ≤ 1 (Algorithm 1, step 2.2).
-
-        Under Hypothesis A (non-positive off-diagonals of the stiffness matrix) the
-        unconstrained minimiser already lies in [0, 1] (Proposition 3) and one linear solve is
-        all. Bisection refinement creates obtuse angles that violate Hypothesis A, and then the
-        unconstrained solution can dip below 0 by up to ~1e−4 next to the crack. The v-step
-        therefore minimises over [0, 1] (the domain of I_ε in eq. 2), with a primal-dual
-        active set that only runs when the unconstrained solution leaves the bounds;
-        ``bound_active`` counts the DOFs held at a bound in the last v-step. With pointwise
-        irreversibility the upper bound is v(t_{k−1}) (eq. 3) and the active set always runs.
-
-        Parameters
-        ----------
-        crack
-            Boolean DOF mask of CR(t_k), where v is fixed to 0.
-        """
-        arrays = self.arrays
-        with self.timer("assembly"):
-            density = self.elasticity.degraded_density(arrays, self.u_values) / self.model.gc
-            values = self.b_assembler.b_values(density, self.model.surface)
-            self.b_matrix.AsVector().FV().NumPy()[:] = values
-            self.v_values[crack] = 0.0
-        with self.timer("solve"):
-            free = ~crack
-            self._b_solver = self._refreshed(self._b_solver, "v", free)
-            self._v_correction(self._b_solver)
-            if self.model.irreversibility == "pointwise":
-                upper = self.v_prev.vec.FV().NumPy().copy()
-                self.bound_active = self._enforce_bounds(free, upper)
-            elif self.bounded_v:
-                self.bound_active = self._enforce_bounds(free, 1.0)
-
-    def _refreshed(
-        self, solver: LaggedCholesky | AMGConjugateGradient | None, stage: str, free: np.ndarray
-    ) -> LaggedCholesky | AMGConjugateGradient:
-        """Return a solver of the ``stage``'s matrix (``"u"``: a_j, ``"v"``: b_j) on ``free``.
-
-        Call after rewriting the matrix values. A Cholesky factorisation is kept while the free
-        DOFs stay the same; the CG solver keeps its form and preconditioner per mesh.
-        """
-        matrix = self.a_matrix if stage == "u" else self.b_matrix
-        if self.linear_solver == "cg-h1amg":
-            if solver is None:
-                # A P1 space of its own: the solver overwrites its free DOFs.
-                space = H1(self.mesh, order=1, autoupdate=False)
-                form = (
-                    a_form(space, self.v, self.model.eta)
-                    if stage == "u"
-                    else b_form(space, self.u, self.model.surface, gc=self.model.gc)
-                )
-                return AMGConjugateGradient(form, matrix, free)
-            solver.values_changed(free)
-            return solver
-        if solver is None or not np.array_equal(free, solver.free):
-            return LaggedCholesky(matrix, free, self.max_cg)
-        solver.values_changed()
-        return solver
-
-    def _solve(self, solver: LaggedCholesky | AMGConjugateGradient, stage: str = "u") -> None:
-        """Set the stage's correction to the solution of the system with its residual."""
-        if stage == "u":
-            solver.solve(self._residual, self._correction)
-        else:
-            solver.solve(self._v_residual, self._v_step)
-        self.linear_solves += 1
-        if isinstance(solver, AMGConjugateGradient):
-            self.cg_iterations.append(solver.iterations)
-            self.cg_not_converged += not solver.converged
-
-    def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
-        """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2)."""
-        self._v_residual.FV().NumPy()[:] = self.model.surface.source * self.arrays.mass
-        self._v_residual.data -= self.b_matrix * self.v.vec
-        self._solve(solver, "v")
-        self.v.vec.data += self._v_step
-
-    def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
-        """Primal-dual active set for 0 ≤ v ≤ upper on the free DOFs; return the active count."""
-        v = self.v_values
-        round_off = 1e-12
-        low = free & (v < -round_off)
-        high = free & (v > upper + round_off)
-        if not (low.any() or high.any()):
-            return 0
-        for _ in range(max_sweeps):
-            v[low] = 0.0
-            v[high] = upper[high] if np.ndim(upper) else upper
-            inactive = free & ~low & ~high
-            if self.linear_solver == "cg-h1amg":
-                self._b_solver = self._refreshed(self._b_solver, "v", inactive)
-                self._v_correction(self._b_solver)
-            else:
-                self._v_correction(LaggedCholesky(self.b_matrix, inactive, 0))
-            self._v_residual.FV().NumPy()[:] = self.model.surface.source * self.arrays.mass
-            self._v_residual.data -= self.b_matrix * self.v.vec
-            gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
-            new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
-            new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
-            if np.array_equal(new_low, low) and np.array_equal(new_high, high):
-                break
-            low, high = new_low, new_high
-        else:
-            log.warning("bounded v-step: active set not settled after %d sweeps", max_sweeps)
-        return int(low.sum() + high.sum())
+        density = self.elasticity.degraded_density(self.arrays, self.u_values) / self.model.gc
+        values = self.b_assembler.b_values(density, self.model.surface)
+        self.b_matrix.AsVector().FV().NumPy()[:] = values
 
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
@@ -536,6 +358,15 @@ class ATState:
             self.elasticity,
         )  # fmt: skip
 
+    def bulk_energy(self, u: np.ndarray) -> float:
+        """Return ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) at the current v for the DOF values ``u``."""
+        arrays, density = self.arrays, self.elasticity
+        c = self.assembler.square_mean(self.v_values) + self.model.eta
+        return float(
+            np.dot(arrays.area, c * density.degraded_density(arrays, u))
+            + np.dot(arrays.area, density.intact_density(arrays, u))
+        )
+
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.
 
@@ -545,9 +376,10 @@ class ATState:
         ``force_<region>_x`` and ``_y`` per component); ``force`` = 2 r·∂g/∂t is the derivative
         of the bulk energy with respect to the load parameter t.
         """
-        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
-        self._residual.data = self.a_matrix * self.u.vec
-        residual = 2 * self._residual.FV().NumPy()
+        self.assemble_a()
+        product = self.a_matrix.CreateColVector()
+        product.data = self.a_matrix * self.u.vec
+        residual = 2 * product.FV().NumPy()
         components = self.elasticity.components
         forces = {}
         for name, dofs in self.region_dofs.items():
@@ -581,34 +413,3 @@ class ATState:
             "v_min": float(v.min()),
             "v_max": float(v.max()),
         }
-
-    # -- checkpoints ------------------------------------------------------------------------
-    def solver_state(self) -> dict[str, np.ndarray]:
-        """Return the matrix values behind each lagged factorisation and the v-step's free DOFs.
-
-        With ``max_cg > 0`` a factorisation outlives its load step; a resumed run rebuilds it
-        from these values to repeat the uninterrupted run exactly (:mod:`ngat.checkpoint`).
-        The ``cg-h1amg`` solver keeps nothing between solves but its per-mesh form.
-        """
-        saved = {}
-        if self.linear_solver != "direct":
-            return saved
-        if self._a_solver is not None:
-            saved["a_factored"] = self._a_solver.factored_values
-        if self._b_solver is not None:
-            saved["b_factored"] = self._b_solver.factored_values
-            saved["b_free"] = self._b_solver.free
-        return saved
-
-    def restore_solver_state(self, saved: Mapping[str, np.ndarray]) -> None:
-        """Rebuild the lagged factorisations from :meth:`solver_state`.
-
-        The next solve rewrites the matrix values and so starts from a stale factorisation, as
-        it would have in the uninterrupted run.
-        """
-        if "a_factored" in saved:
-            self.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
-            self._a_solver = LaggedCholesky(self.a_matrix, ~self.dirichlet, self.max_cg)
-        if "b_factored" in saved:
-            self.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
-            self._b_solver = LaggedCholesky(self.b_matrix, saved["b_free"], self.max_cg)

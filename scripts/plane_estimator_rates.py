@@ -23,6 +23,7 @@ import numpy as np
 from ngsolve import CF, Grad, InnerProduct, Integrate, Trace, dx, x, y
 
 from ngat.geometries import surfing_mode_i as mode_i
+from ngat.halfsteps import HalfStepSolvers
 from ngat.minimization import estimate
 from ngat.parameters import ModelParameters
 from ngat.refinement import dorfler_marking, refine
@@ -58,11 +59,12 @@ def sequence(marking: str, max_dofs: float, maxh: float = 0.1) -> list[dict]:
     scene = mode_i.make_scene(amplitude=1.0, ramp=0, speed=0)
     model = ModelParameters(model="plane_strain", young=mode_i.YOUNG, poisson=mode_i.POISSON)
     state = ATState(scene.make_mesh(maxh), model, scene.loads)
+    steps = HalfStepSolvers(state)
     exact = mode_i.tip_field(1.0, mode_i.CRACK_LENGTH)
     rows = []
     while True:
         state.apply_load(1.0)
-        state.solve_u()
+        steps.solve_u()
         indicators = estimate(state, "u", np.zeros(state.arrays.nv, dtype=bool))
         mu, error = float(np.sqrt(indicators.sum())), energy_error(state, exact)
         rows.append({"ndof": state.fes_u.ndof, "mu": mu, "error": error, "effectivity": mu / error})

@@ -8,10 +8,10 @@ import pytest
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
 from ngat.geometries.obtuse_line import scene as OBTUSE
+from ngat.halfsteps import HalfStepSolvers
 from ngat.minimization import ConvergenceError
 from ngat.parameters import ParameterError
 from ngat.scene import load_scene
-from ngat.state import ATState
 
 
 def problems(folder):
@@ -106,30 +106,29 @@ def test_newton_without_lumping_is_refused():
 
 def test_energy_increase_is_detected(tmp_path, monkeypatch):
     # A broken v-step (it adds noise after solving) makes an iteration increase I_j.
-    solve_v = ATState.solve_v
+    solve_v = HalfStepSolvers.solve_v
 
     def noisy(self, crack):
         solve_v(self, crack)
-        rng = np.random.default_rng(len(self.v_values))
-        self.v_values[~crack] = np.clip(
-            self.v_values[~crack] - 0.2 * rng.random((~crack).sum()), 0, 1
-        )
+        v = self.state.v_values
+        rng = np.random.default_rng(len(v))
+        v[~crack] = np.clip(v[~crack] - 0.2 * rng.random((~crack).sum()), 0, 1)
 
-    monkeypatch.setattr(ATState, "solve_v", noisy)
+    monkeypatch.setattr(HalfStepSolvers, "solve_v", noisy)
     scene, parameters, times = coarse_two_slits(am_max_iter=5, eps=0.5)
     run(scene, parameters, times, tmp_path / "run")
     assert "energy-increase" in problems(tmp_path / "run")
 
 
 def test_nan_stops_the_run_and_is_named(tmp_path, monkeypatch):
-    solve_u = ATState.solve_u
+    solve_u = HalfStepSolvers.solve_u
 
     def poisoned(self):
         solve_u(self)
-        if self.t.Get() > 1:
-            self.u_values[0] = np.nan
+        if self.state.t.Get() > 1:
+            self.state.u_values[0] = np.nan
 
-    monkeypatch.setattr(ATState, "solve_u", poisoned)
+    monkeypatch.setattr(HalfStepSolvers, "solve_u", poisoned)
     scene, parameters, times = coarse_two_slits(eps=0.5)
     with pytest.raises(ConvergenceError):
         run(scene, parameters, times, tmp_path / "run")

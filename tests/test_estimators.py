@@ -33,6 +33,7 @@ from ngat.crack_density import crack_density
 from ngat.estimators import EdgeTopology, meets, mu_estimator, nu_estimator
 from ngat.forms import MeshArrays
 from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
+from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ModelParameters
 from ngat.refinement import dorfler_marking
 from ngat.scene import load_scene
@@ -106,11 +107,12 @@ def cracked_state():
     mesh = scene.make_mesh(0.5)
     mesh.Refine()
     state = ATState(mesh, ModelParameters(eps=0.1, eta=1e-3), scene.loads)
+    steps = HalfStepSolvers(state)
     state.apply_load(1.0)
     crack = np.abs(state.arrays.coords[:, 1] - 3) < 0.4
-    state.solve_u()
-    state.solve_v(crack)
-    state.solve_u()
+    steps.solve_u()
+    steps.solve_v(crack)
+    steps.solve_u()
     return state, crack
 
 
@@ -222,11 +224,12 @@ def _slit_laplace_levels(adaptive, maxh, max_ndof):
     scene = load_scene("slit-laplace")
     mesh = scene.make_mesh(maxh)
     state = ATState(mesh, ModelParameters(), scene.loads)
+    steps = HalfStepSolvers(state)
     exact = _slit_gradient()
     rows = []
     while True:
         state.apply_load(1.0)
-        state.solve_u()
+        steps.solve_u()
         indicators = mu_estimator(
             state.arrays,
             EdgeTopology(state.arrays),
@@ -290,6 +293,7 @@ def test_smooth_uniform_refinement_mu_decays_like_h(phase_field):
     scene = load_scene("smooth-laplace")
     mesh = scene.make_mesh(0.05)
     state = ATState(mesh, ModelParameters(), scene.loads)
+    steps = HalfStepSolvers(state)
     rows = []
     for level in range(4):
         if level > 0:
@@ -298,7 +302,7 @@ def test_smooth_uniform_refinement_mu_decays_like_h(phase_field):
         if phase_field == "smooth":
             state.v_values[:] = _smooth_v(state.arrays.coords)
         state.apply_load(1.0)
-        state.solve_u()
+        steps.solve_u()
         indicators = mu_estimator(
             state.arrays,
             EdgeTopology(state.arrays),
@@ -331,13 +335,14 @@ def test_estimator_cost_against_one_alternating_minimisation_iteration():
     while mesh.ne < 80_000:
         mesh.Refine()
     state = ATState(mesh, ModelParameters(), scene.loads)
+    steps = HalfStepSolvers(state)
     state.apply_load(1.0)
     crack = state.crack_set()
     timings = {}
     for attempt in ("first", "again"):
         start = time.perf_counter()
-        state.solve_u()
-        state.solve_v(crack)
+        steps.solve_u()
+        steps.solve_v(crack)
         timings[f"u+v solve ({attempt})"] = time.perf_counter() - start
     start = time.perf_counter()
     edges = EdgeTopology(state.arrays)

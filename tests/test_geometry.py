@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ModelParameters
 from ngat.scene import load_scene
 from ngat.state import ATState
@@ -15,8 +16,9 @@ def test_u_jumps_across_every_slit_node(rounds):
     for _ in range(rounds):
         mesh.Refine()
     state = ATState(mesh, ModelParameters(), {"left": lambda t: -t, "right": lambda t: t})
+    steps = HalfStepSolvers(state)
     state.apply_load(1.0)
-    state.solve_u()
+    steps.solve_u()
     coords, u = state.arrays.coords, state.u_values
     x, y = coords[:, 0], coords[:, 1]
     for slit, tip in [((x == 2) & (y < 2), (2, 2)), ((x == 4) & (y > 4), (4, 4))]:

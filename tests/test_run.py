@@ -7,6 +7,7 @@ import numpy as np
 import pyvista
 
 from ngat.cli import main
+from ngat.halfsteps import HalfStepSolvers
 from ngat.output import REQUIRED_COLUMNS
 
 
@@ -73,14 +74,15 @@ def test_reaction_force_is_the_load_derivative_of_the_bulk_energy(quick_run):
     # With v fixed the bulk energy is quadratic in t, so a central difference is exact.
     result, _, _ = quick_run
     state = result.state
+    steps = HalfStepSolvers(state)
     t, h = 1.0, 1e-3
     energies = []
     for s in (t - h, t + h):
         state.apply_load(s)
-        state.solve_u()
+        steps.solve_u()
         energies.append(state.energies()["bulk"])
     state.apply_load(t)
-    state.solve_u()
+    steps.solve_u()
     forces = state.reaction_forces()
     assert abs(forces["force"] - (energies[1] - energies[0]) / (2 * h)) < 1e-8 * abs(
         forces["force"]
@@ -107,12 +109,13 @@ def test_proposition_3_without_bounds_on_a_nonobtuse_mesh():
     from ngat.state import ATState
 
     state = ATState(aligned_mesh(0.05), ModelParameters(eps=0.05), {"lower": lambda t: t * 5 * x})
+    steps = HalfStepSolvers(state)
     state.apply_load(1.0)
     crack = state.crack_set()
     for _ in range(10):
-        state.solve_u()
-        state.solve_v(crack)
-        assert state.bound_active == 0
+        steps.solve_u()
+        steps.solve_v(crack)
+        assert steps.bound_active == 0
     v = state.v_values
     assert v.min() < 0.5, "the load should damage the strip"
     assert v.min() >= 0 and v.max() <= 1

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from ngat.driver import run
+from ngat.halfsteps import HalfStepSolvers
 from ngat.scene import load_scene
 from ngat.state import ATState
 
@@ -23,8 +24,9 @@ def test_top_edge_holds_only_u_y():
     scene = load_scene("sent")
     parameters, _ = scene.configure(quick=True)
     state = ATState(scene.make_mesh(0.1), parameters.model, scene.loads)
+    steps = HalfStepSolvers(state)
     state.apply_load(2e-3)
-    state.solve_u()
+    steps.solve_u()
     nv = state.arrays.nv
     top, bottom = state.region_vertices["top"], state.region_vertices["bottom"]
     ux, uy = state.u_values[:nv], state.u_values[nv:]

@@ -10,11 +10,11 @@ import pytest
 import scipy.sparse as sp
 
 from ngat.driver import run
-from ngat.minimization import remaining_iterations
 from ngat.newton import NewtonSolver
 from ngat.parameters import NONLINEAR_SOLVERS
 from ngat.scene import load_scene
 from ngat.state import ATState
+from ngat.strategies import STRATEGIES, NewtonSwitch, nonlinear_strategy, remaining_iterations
 
 TIMES = np.array([0.0, 0.5, 1.0, 1.2, 1.3])  # the last two steps are in the growth phase
 
@@ -142,3 +142,22 @@ def test_remaining_iterations_of_a_linearly_converging_iteration():
     assert remaining_iterations(0.05, 0.04, 1e-3) == np.inf  # not contracting (near a saddle)
     assert remaining_iterations(0.05, np.inf, 1e-3) == 0.0  # no rate yet
     assert remaining_iterations(1e-4, 1e-3, 1e-3) == 0.0
+
+
+def test_every_nonlinear_solver_has_a_strategy():
+    assert set(STRATEGIES) == set(NONLINEAR_SOLVERS)
+
+
+def test_newton_switch_keeps_the_newton_solver_of_a_state_across_load_steps():
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
+    strategy = nonlinear_strategy(parameters.solver)
+    assert isinstance(strategy, NewtonSwitch)
+    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    strategy.start(state)
+    newton = strategy.newton
+    strategy.start(state)
+    assert strategy.newton is newton
+    other = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    strategy.start(other)
+    assert strategy.newton.state is other

@@ -1,0 +1,309 @@
+"""The two half-steps of Algorithm 1 on an :class:`ngat.state.ATState`, with their linear solvers.
+
+The u-step minimises I_j(·, v) over g(t_k) + X_{j,D}, the v-step I_j(u, ·) over X_{j,CR} with
+0 ≤ v ≤ 1 (paper, Algorithm 1, steps 2.1 and 2.2). :class:`HalfStepSolvers` has the state write
+the matrices of a_j and b_j in place (:meth:`ngat.state.ATState.assemble_a`,
+:meth:`~ngat.state.ATState.assemble_b`) and solves with :mod:`ngat.linear`: per mesh, a sparse
+Cholesky factorisation refreshed with ``Inverse.Update()``, which keeps the symbolic analysis,
+or, with ``linear_solver="cg-h1amg"``, CG with a rebuilt h1amg preconditioner. It owns what
+outlives a solve — the factorisations, which a checkpoint keeps (:meth:`solver_state`) — and
+counts the solves (:class:`LinearStatistics`); the state holds the fields and operators only.
+
+A module of its own rather than a part of :mod:`ngat.linear`: that module solves a linear
+system whatever it comes from, this one knows the half-steps' minimisation problems — the
+semismooth Newton u-step of an energy split and the active set of the bounded v-step.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from ngsolve import H1
+
+from ngat.forms import a_form, b_form
+from ngat.linear import AMGConjugateGradient, LaggedCholesky
+from ngat.parameters import SolverParameters
+from ngat.state import ATState
+
+__all__ = ["HalfStepSolvers", "LinearStatistics"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class LinearStatistics:
+    """Linear solves of the half-steps since :meth:`HalfStepSolvers.start`.
+
+    Attributes
+    ----------
+    solves
+        Linear systems solved (each with a new matrix or a lagged factorisation).
+    cg_iterations
+        CG iterations of every ``cg-h1amg`` solve.
+    cg_not_converged
+        ``cg-h1amg`` solves that stopped at the iteration cap above the tolerance.
+    """
+
+    solves: int = 0
+    cg_iterations: list[int] = field(default_factory=list)
+    cg_not_converged: int = 0
+
+
+class HalfStepSolvers:
+    """The u-step and the v-step of an :class:`~ngat.state.ATState` with their linear solvers.
+
+    Per mesh of the state, the solvers and work vectors are made on first use; a refinement
+    (a new ``state.arrays``) drops them.
+
+    Parameters
+    ----------
+    state
+        Fields and operators.
+    max_cg
+        CG iterations accepted with a stale Cholesky factor before it is refreshed
+        (:class:`ngat.linear.LaggedCholesky`); 0 refactorises at every solve.
+    bounded_v
+        Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`solve_v`); ``False`` solves the
+        unconstrained linear system only (the paper's v-step, exact under Hypothesis A).
+    linear_solver
+        ``"direct"``: sparse Cholesky (:class:`ngat.linear.LaggedCholesky`); ``"cg-h1amg"``:
+        CG with NGSolve's h1amg preconditioner (:class:`ngat.linear.AMGConjugateGradient`).
+
+    Attributes
+    ----------
+    statistics : LinearStatistics
+        The solves since the last :meth:`start`.
+    """
+
+    def __init__(
+        self,
+        state: ATState,
+        max_cg: int = 0,
+        bounded_v: bool = True,
+        linear_solver: str = "direct",
+    ):
+        self.state = state
+        self.max_cg = max_cg
+        self.bounded_v = bounded_v
+        self.linear_solver = linear_solver
+        self.statistics = LinearStatistics()
+        self._arrays = None
+        self._on_mesh()
+
+    @classmethod
+    def from_parameters(cls, state: ATState, solver: SolverParameters) -> HalfStepSolvers:
+        """Return the solvers set by ``solver.max_cg``, ``bounded_v`` and ``linear_solver``."""
+        return cls(state, solver.max_cg, solver.bounded_v, solver.linear_solver)
+
+    def start(self) -> None:
+        """Begin a load step: the statistics count from zero."""
+        self.statistics = LinearStatistics()
+
+    @property
+    def bound_active(self) -> int:
+        """DOFs held at a bound of v by the last v-step on the current mesh (0 before one)."""
+        return self._bound_active if self._arrays is self.state.arrays else 0
+
+    def _on_mesh(self) -> None:
+        """Drop the solvers and work vectors of an earlier mesh of the state."""
+        state = self.state
+        if self._arrays is state.arrays:
+            return
+        self._arrays = state.arrays
+        self._a_solver: LaggedCholesky | AMGConjugateGradient | None = None
+        self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
+        self._residual = state.a_matrix.CreateColVector()
+        self._correction = state.a_matrix.CreateColVector()
+        self._v_residual = state.b_matrix.CreateColVector()
+        self._v_step = state.b_matrix.CreateColVector()
+        self._bound_active = 0
+
+    # -- u-step -----------------------------------------------------------------------------
+    def solve_u(self, max_iterations: int = 50) -> None:
+        """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1).
+
+        Without an energy split this is one linear solve. With one, I_j(·, v) is convex and
+        piecewise quadratic (the volumetric part of an element degrades only in tension), and
+        a semismooth Newton method minimises it: solve with the element matrices of the current
+        tension pattern, halve the step while the energy would rise, and stop when the pattern
+        no longer changes (the minimiser of that quadratic piece is then the minimiser).
+        """
+        state = self.state
+        self._on_mesh()
+        u = state.u_values
+        for _ in range(max_iterations):
+            tension = state.elasticity.tension(state.arrays, u)
+            with state.timer("assembly"):
+                state.assemble_a()
+            with state.timer("solve"):
+                self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
+                self._residual.data = -1 * (state.a_matrix * state.u.vec)
+                self._solve(self._a_solver)
+            if tension is None:
+                state.u.vec.data += self._correction
+                return
+            step = self._correction.FV().NumPy().copy()
+            if self._split_step(step, tension):
+                return
+        log.warning("split u-step: tension pattern not settled after %d iterations", max_iterations)
+
+    def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
+        """Move u along a semismooth Newton step; return whether the u-step has converged."""
+        state = self.state
+        u = state.u_values
+        start, scale = state.bulk_energy(u), 1.0
+        for _ in range(30):
+            trial = u + scale * step
+            if state.bulk_energy(trial) <= start:
+                break
+            scale /= 2
+        u[:] = trial
+        settled = np.array_equal(state.elasticity.tension(state.arrays, u), tension)
+        return scale == 1.0 and settled or np.abs(scale * step).max() <= 1e-14 * np.abs(u).max()
+
+    # -- v-step -----------------------------------------------------------------------------
+    def solve_v(self, crack: np.ndarray) -> None:
+        """v-step: minimise I_j(u, ·) over X_{j,CR} with 0 ≤ v ≤ 1 (Algorithm 1, step 2.2).
+
+        Under Hypothesis A (non-positive off-diagonals of the stiffness matrix) the
+        unconstrained minimiser already lies in [0, 1] (Proposition 3) and one linear solve is
+        all. Bisection refinement creates obtuse angles that violate Hypothesis A, and then the
+        unconstrained solution can dip below 0 by up to ~1e−4 next to the crack. The v-step
+        therefore minimises over [0, 1] (the domain of I_ε in eq. 2), with a primal-dual
+        active set that only runs when the unconstrained solution leaves the bounds;
+        :attr:`bound_active` counts the DOFs held at a bound. With pointwise irreversibility
+        the upper bound is v(t_{k−1}) (eq. 3) and the active set always runs.
+
+        Parameters
+        ----------
+        crack
+            Boolean DOF mask of CR(t_k), where v is fixed to 0.
+        """
+        state = self.state
+        self._on_mesh()
+        with state.timer("assembly"):
+            state.assemble_b()
+            state.v_values[crack] = 0.0
+        with state.timer("solve"):
+            free = ~crack
+            self._b_solver = self._refreshed(self._b_solver, "v", free)
+            self._v_correction(self._b_solver)
+            if state.model.irreversibility == "pointwise":
+                upper = state.v_prev.vec.FV().NumPy().copy()
+                self._bound_active = self._enforce_bounds(free, upper)
+            elif self.bounded_v:
+                self._bound_active = self._enforce_bounds(free, 1.0)
+
+    def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
+        """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2)."""
+        state = self.state
+        self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
+        self._v_residual.data -= state.b_matrix * state.v.vec
+        self._solve(solver, "v")
+        state.v.vec.data += self._v_step
+
+    def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
+        """Primal-dual active set for 0 ≤ v ≤ upper on the free DOFs; return the active count."""
+        state = self.state
+        v = state.v_values
+        round_off = 1e-12
+        low = free & (v < -round_off)
+        high = free & (v > upper + round_off)
+        if not (low.any() or high.any()):
+            return 0
+        for _ in range(max_sweeps):
+            v[low] = 0.0
+            v[high] = upper[high] if np.ndim(upper) else upper
+            inactive = free & ~low & ~high
+            if self.linear_solver == "cg-h1amg":
+                self._b_solver = self._refreshed(self._b_solver, "v", inactive)
+                self._v_correction(self._b_solver)
+            else:
+                self._v_correction(LaggedCholesky(state.b_matrix, inactive, 0))
+            self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
+            self._v_residual.data -= state.b_matrix * state.v.vec
+            gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
+            new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
+            new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
+            if np.array_equal(new_low, low) and np.array_equal(new_high, high):
+                break
+            low, high = new_low, new_high
+        else:
+            log.warning("bounded v-step: active set not settled after %d sweeps", max_sweeps)
+        return int(low.sum() + high.sum())
+
+    # -- linear solves ----------------------------------------------------------------------
+    def _refreshed(
+        self, solver: LaggedCholesky | AMGConjugateGradient | None, stage: str, free: np.ndarray
+    ) -> LaggedCholesky | AMGConjugateGradient:
+        """Return a solver of the ``stage``'s matrix (``"u"``: a_j, ``"v"``: b_j) on ``free``.
+
+        Call after rewriting the matrix values. A Cholesky factorisation is kept while the free
+        DOFs stay the same; the CG solver keeps its form and preconditioner per mesh.
+        """
+        state = self.state
+        matrix = state.a_matrix if stage == "u" else state.b_matrix
+        if self.linear_solver == "cg-h1amg":
+            if solver is None:
+                # A P1 space of its own: the solver overwrites its free DOFs.
+                space = H1(state.mesh, order=1, autoupdate=False)
+                form = (
+                    a_form(space, state.v, state.model.eta)
+                    if stage == "u"
+                    else b_form(space, state.u, state.model.surface, gc=state.model.gc)
+                )
+                return AMGConjugateGradient(form, matrix, free)
+            solver.values_changed(free)
+            return solver
+        if solver is None or not np.array_equal(free, solver.free):
+            return LaggedCholesky(matrix, free, self.max_cg)
+        solver.values_changed()
+        return solver
+
+    def _solve(self, solver: LaggedCholesky | AMGConjugateGradient, stage: str = "u") -> None:
+        """Set the stage's correction to the solution of the system with its residual."""
+        if stage == "u":
+            solver.solve(self._residual, self._correction)
+        else:
+            solver.solve(self._v_residual, self._v_step)
+        self.statistics.solves += 1
+        if isinstance(solver, AMGConjugateGradient):
+            self.statistics.cg_iterations.append(solver.iterations)
+            self.statistics.cg_not_converged += not solver.converged
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def solver_state(self) -> dict[str, np.ndarray]:
+        """Return the matrix values behind each lagged factorisation and the v-step's free DOFs.
+
+        With ``max_cg > 0`` a factorisation outlives its load step; a resumed run rebuilds it
+        from these values to repeat the uninterrupted run exactly (:mod:`ngat.checkpoint`).
+        The ``cg-h1amg`` solver keeps nothing between solves but its per-mesh form.
+        """
+        self._on_mesh()
+        saved = {}
+        if self.linear_solver != "direct":
+            return saved
+        if self._a_solver is not None:
+            saved["a_factored"] = self._a_solver.factored_values
+        if self._b_solver is not None:
+            saved["b_factored"] = self._b_solver.factored_values
+            saved["b_free"] = self._b_solver.free
+        return saved
+
+    def restore_solver_state(self, saved: Mapping[str, np.ndarray]) -> None:
+        """Rebuild the lagged factorisations from :meth:`solver_state`.
+
+        The next solve rewrites the matrix values and so starts from a stale factorisation, as
+        it would have in the uninterrupted run.
+        """
+        state = self.state
+        self._on_mesh()
+        if "a_factored" in saved:
+            state.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
+            self._a_solver = LaggedCholesky(state.a_matrix, ~state.dirichlet, self.max_cg)
+        if "b_factored" in saved:
+            state.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
+            self._b_solver = LaggedCholesky(state.b_matrix, saved["b_free"], self.max_cg)
