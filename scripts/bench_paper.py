@@ -1,34 +1,55 @@
-"""Benchmark: the paper's example end to end, and where the time goes.
+"""Benchmark: the paper's example end to end, where the time goes, and against another revision.
 
 Question: how long does ``ngat run two-slits`` (the paper's Section 3 example, 161 load steps,
-Algorithm 2, docs/design.md scene 1) take on this machine, how is the wall time split between
-assembly, linear solves, estimation, refinement and output, how much memory does it need, and
-how many alternating-minimisation iterations does it spend, in total and in the growth phase?
+docs/design.md scene 1) take on this machine, how is the wall time split between assembly,
+linear solves, estimation, refinement and output, how much memory does it need, and how many
+alternating-minimisation iterations does it spend, in total and in the growth phase? And is
+the current tree faster or slower than a given git revision, measured side by side?
 
 Targets (issue 4): ≤ 60 s wall (stretch ≤ 30 s), ≥ 70 % of the time in the linear solves,
 peak memory ≤ 2 GB.
 
-Run ``python scripts/bench_paper.py`` (full) or ``--quick``; output in ``--out`` (default
-``results/bench_paper``): ``bench.json`` and ``phases.png``.
+One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's quick variant);
+output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time, seconds per
+timed phase, peak memory, AM iterations in total and in the growth window, linear solves,
+fracture time, E(1.0), final elements, element sizes) and ``phases.png``; the run's results
+folder in ``run/``.
+
+Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
+(removed at the end, also on an error or Ctrl-C) and runs the benchmark ``--repeats`` times
+(default 3) for each checkout, alternating current/REV so that machine noise hits both alike.
+Each run is this script's one-run mode in a process of its own with ``PYTHONPATH`` set to the
+checkout's root: the two versions never share a process and are measured by the same code,
+through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
+an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
+printed) and ``compare.json`` with, per checkout, the wall time (median, min, max), the share
+of the wall time per phase (the phases both checkouts time), linear solves, final elements,
+fracture time, the error of E(1.0) against ``geometries/reference/two_slits.json``, peak
+memory, and the ratio current/REV of the median wall times.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import resource
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from ngat.driver import run  # noqa: E402
-from ngat.scene import load_scene  # noqa: E402
-
-PHASES = ["assembly", "solve", "estimate", "refine", "output", "mesh"]
+ROOT = Path(__file__).resolve().parent.parent
+SCRIPT = Path(__file__).resolve()
+REFERENCE = json.loads((ROOT / "geometries/reference/two_slits.json").read_text())
+MISSING = "–"
+"""Shown for a figure a checkout cannot give."""
 
 
 def growth_onset(records: list[dict], slit_tips=((2.0, 2.0), (4.0, 4.0)), distance=0.1):
@@ -40,45 +61,258 @@ def growth_onset(records: list[dict], slit_tips=((2.0, 2.0), (4.0, 4.0)), distan
     return None
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="the --quick variant of the scene")
-    parser.add_argument("--out", type=Path, default=Path("results/bench_paper"))
-    args = parser.parse_args()
+def optional(value: Callable[[], Any]) -> Any:
+    """Return ``value()``, or ``None`` where an older revision's records or summary lack a key."""
+    try:
+        return value()
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
+
+
+def measure(quick: bool, folder: Path) -> dict:
+    """Run two-slits with the ngat on the path and return its figures (``None``: not given)."""
+    import ngat
+    from ngat.driver import run
+    from ngat.scene import load_scene
+
     scene = load_scene("two-slits")
-    parameters, times = scene.configure(quick=args.quick)
+    parameters, times = scene.configure(quick=quick)
     begin = time.perf_counter()
-    result = run(scene, parameters, times, args.out / "run")
+    result = run(scene, parameters, times, folder)
     wall = time.perf_counter() - begin
     records, summary = result.records, result.summary
-    timing = summary["timing"]
-    onset = growth_onset(records)
+    timing = summary.get("timing", {})
+    onset = optional(lambda: growth_onset(records))
     fracture = summary.get("fracture_time")
-    growth = [r for r in records if onset is not None and onset <= r["t"] <= (fracture or 9e9)]
-    bench = {
+    end = fracture if fracture is not None else float("inf")
+    return {
         "wall_s": round(wall, 2),
-        "phases_s": {p: timing.get(p, 0.0) for p in PHASES} | {"other": timing["other"]},
-        "solve_fraction": round(timing.get("solve", 0.0) / timing["wall"], 3),
+        "phases_s": {phase: seconds for phase, seconds in timing.items() if phase != "wall"},
+        "solve_fraction": optional(lambda: round(timing["solve"] / timing["wall"], 3)),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-        "am_iterations": summary["am_iterations"],
-        "am_iterations_growth": sum(r["am_iterations"] for r in growth),
+        "am_iterations": optional(lambda: sum(r["am_iterations"] for r in records)),
+        "am_iterations_growth": optional(
+            lambda: sum(r["am_iterations"] for r in records if onset <= r["t"] <= end)
+        ),
         "growth_window": [onset, fracture],
+        "linear_solves": optional(lambda: sum(r["linear_solves"] for r in records)),
         "fracture_time": fracture,
-        "final_elements": records[-1]["elements"],
-        "h_min": min(r["h_min"] for r in records),
-        "h_max": records[-1]["h_max"],
+        "energy_1.0": next((r.get("total") for r in records if abs(r["t"] - 1.0) < 1e-9), None),
+        "final_elements": optional(lambda: records[-1]["elements"]),
+        "h_min": optional(lambda: min(r["h_min"] for r in records)),
+        "h_max": optional(lambda: records[-1]["h_max"]),
         "steps": len(records),
+        "ngat": str(Path(ngat.__file__).resolve().parent),
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "bench.json").write_text(json.dumps(bench, indent=2))
-    print(json.dumps(bench, indent=2))
+
+
+def plot_phases(bench: dict, quick: bool, path: Path) -> None:
+    """Draw the seconds per phase of one run as horizontal bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(6, 3))
     split = bench["phases_s"]
     ax.barh(list(split), list(split.values()), color="tab:blue")
     ax.set_xlabel("wall time [s]")
-    ax.set_title(f"two-slits{' --quick' if args.quick else ''}: {wall:.1f} s wall")
+    ax.set_title(f"two-slits{' --quick' if quick else ''}: {bench['wall_s']:.1f} s wall")
     fig.tight_layout()
-    fig.savefig(args.out / "phases.png", dpi=150)
+    fig.savefig(path, dpi=150)
+
+
+def bench_one(quick: bool, out: Path) -> None:
+    """Run the benchmark once in this process; write ``bench.json`` and ``phases.png``."""
+    bench = measure(quick, out / "run")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(bench, indent=2))
+    print(json.dumps(bench, indent=2))
+    plot_phases(bench, quick, out / "phases.png")
+
+
+def git(*arguments: str) -> str:
+    """Run git in this script's repository and return its output; exit with git's message."""
+    done = subprocess.run(
+        ["git", "-C", str(ROOT), *arguments], capture_output=True, text=True, check=False
+    )
+    if done.returncode:
+        raise SystemExit(f"git {' '.join(arguments)} failed: {done.stderr.strip()}")
+    return done.stdout.strip()
+
+
+@contextlib.contextmanager
+def worktree(revision: str) -> Iterator[Path]:
+    """Yield a temporary detached git worktree of ``revision``; remove it on exit."""
+    with tempfile.TemporaryDirectory(prefix="bench-against-") as tmp:
+        path = Path(tmp) / "checkout"
+        git("worktree", "add", "--detach", str(path), revision)
+        try:
+            yield path
+        finally:
+            git("worktree", "remove", "--force", str(path))
+
+
+def describe(revision: str | None) -> str:
+    """Return the short commit of ``revision``, or of the current tree (``+ changes`` if edited)."""
+    if revision is not None:
+        short = git("rev-parse", "--short", revision)
+        return short if revision.startswith(short) else f"{revision} ({short})"
+    edited = subprocess.run(["git", "-C", str(ROOT), "diff", "--quiet", "HEAD"]).returncode
+    return f"current ({git('rev-parse', '--short', 'HEAD')}{' + changes' if edited else ''})"
+
+
+def bench_child(root: Path, quick: bool) -> dict:
+    """Return the figures of one run in a process of its own, only ``root`` on PYTHONPATH."""
+    with tempfile.TemporaryDirectory(prefix="bench-run-") as tmp:
+        command = [sys.executable, str(SCRIPT), "--out", tmp, *(["--quick"] if quick else [])]
+        environment = {**os.environ, "PYTHONPATH": str(root)}
+        done = subprocess.run(command, env=environment, stdout=subprocess.DEVNULL, check=False)
+        if done.returncode:
+            raise SystemExit(f"the run in {root} failed with exit status {done.returncode}")
+        bench = json.loads((Path(tmp) / "bench.json").read_text())
+    if not Path(bench["ngat"]).is_relative_to(root.resolve()):
+        raise SystemExit(f"the run for {root} imported ngat from {bench['ngat']}")
+    return bench
+
+
+def energy_error(bench: dict) -> float | None:
+    """Return the error of E(1.0) against the reference in %, or ``None`` without E(1.0)."""
+    steps = REFERENCE["steps"]
+    reference = steps["total"][steps["t"].index(1.0)]
+    energy = bench.get("energy_1.0")
+    return None if energy is None else round(100 * (energy / reference - 1), 4)
+
+
+def agreed(values: list) -> Any:
+    """Return the one value all runs gave, or all distinct values if the runs disagree."""
+    distinct = list(dict.fromkeys(values))
+    return distinct[0] if len(distinct) == 1 else distinct
+
+
+def summarise(benches: list[dict], phases: list[str]) -> dict:
+    """Return one checkout's row of the table from its runs."""
+    walls = [b["wall_s"] for b in benches]
+    return {
+        "runs": len(benches),
+        "wall_median_s": round(statistics.median(walls), 2),
+        "wall_min_s": min(walls),
+        "wall_max_s": max(walls),
+        "phase_share": {
+            p: round(statistics.median(b["phases_s"][p] / b["wall_s"] for b in benches), 3)
+            for p in phases
+        },
+        "linear_solves": agreed([b.get("linear_solves") for b in benches]),
+        "final_elements": agreed([b.get("final_elements") for b in benches]),
+        "fracture_time": agreed([b.get("fracture_time") for b in benches]),
+        "energy_error_%": agreed([energy_error(b) for b in benches]),
+        "peak_memory_mb": max(b["peak_memory_mb"] for b in benches),
+    }
+
+
+def common_phases(runs: dict[str, list[dict]]) -> list[str]:
+    """Return the phases every run times, in the order of the first run."""
+    timed = [set(b.get("phases_s") or {}) for benches in runs.values() for b in benches]
+    first = next(iter(runs.values()))[0].get("phases_s") or {}
+    return [p for p in first if all(p in t for t in timed)]
+
+
+def cell(value: Any, digits: int | None = None) -> str:
+    """Format a table cell: ``–`` for a missing figure, ``a / b`` where runs disagree."""
+    if isinstance(value, list):
+        return " / ".join(cell(v, digits) for v in value)
+    if value is None:
+        return MISSING
+    if digits is not None:
+        return f"{value:.{digits}f}"
+    return f"{value:,}" if isinstance(value, int) else f"{value:g}"
+
+
+def table(comparison: dict) -> str:
+    """Return the comparison as a markdown table, the ratio of the median walls below it."""
+    labels, rows = comparison["labels"], comparison["summary"]
+    current, against = rows["current"], rows["against"]
+    lines = [
+        f"| measure | {labels['current']} | {labels['against']} |",
+        "|---|---|---|",
+    ]
+
+    def line(name: str, key: Callable[[dict], str]) -> None:
+        lines.append(f"| {name} | {key(current)} | {key(against)} |")
+
+    line("wall time median [s]", lambda r: cell(r["wall_median_s"], 1))
+    line("wall time min – max [s]", lambda r: f"{r['wall_min_s']:.1f} – {r['wall_max_s']:.1f}")
+    for phase in comparison["phases"]:
+        line(f"share {phase} [%]", lambda r, p=phase: cell(100 * r["phase_share"][p], 1))
+    line("linear solves", lambda r: cell(r["linear_solves"]))
+    line("final elements", lambda r: cell(r["final_elements"]))
+    line("fracture time", lambda r: cell(r["fracture_time"]))
+    line("E(1.0) error [%]", lambda r: cell(r["energy_error_%"], 3))
+    line("peak memory [MB]", lambda r: cell(r["peak_memory_mb"], 0))
+    mode = "two-slits --quick" if comparison["quick"] else "two-slits"
+    return "\n".join(
+        [
+            f"{mode}, {comparison['repeats']} run(s) per checkout, alternating.",
+            "",
+            *lines,
+            "",
+            f"Median wall time current / {comparison['against']}: {comparison['wall_ratio']:.3f}",
+        ]
+    )
+
+
+def stop(signum: int, frame: Any) -> None:
+    """Leave by an exception on SIGTERM, so that the runs end and the worktree goes."""
+    raise SystemExit(128 + signum)
+
+
+def compare(revision: str, repeats: int, quick: bool, out: Path) -> None:
+    """Benchmark the current tree against ``revision``, alternating; write the table."""
+    signal.signal(signal.SIGTERM, stop)
+    labels = {"current": describe(None), "against": describe(revision)}
+    runs: dict[str, list[dict]] = {"current": [], "against": []}
+    with worktree(revision) as checkout:
+        roots = {"current": ROOT, "against": checkout}
+        for k in range(repeats):
+            for name, root in roots.items():
+                runs[name].append(bench_child(root, quick))
+                print(f"run {k + 1}/{repeats} {labels[name]}: {runs[name][-1]['wall_s']} s")
+    phases = common_phases(runs)
+    summary = {name: summarise(benches, phases) for name, benches in runs.items()}
+    comparison = {
+        "against": revision,
+        "quick": quick,
+        "repeats": repeats,
+        "labels": labels,
+        "phases": phases,
+        "summary": summary,
+        "wall_ratio": round(
+            summary["current"]["wall_median_s"] / summary["against"]["wall_median_s"], 3
+        ),
+        "runs": runs,
+    }
+    markdown = table(comparison)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.json").write_text(json.dumps(comparison, indent=2))
+    (out / "compare.md").write_text(markdown + "\n")
+    print(markdown)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="the --quick variant of the scene")
+    parser.add_argument("--out", type=Path, default=Path("results/bench_paper"))
+    parser.add_argument(
+        "--against", metavar="REV", help="compare with this git revision (e.g. HEAD~5)"
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="runs per checkout with --against (default 3)"
+    )
+    args = parser.parse_args()
+    if args.against is None:
+        bench_one(args.quick, args.out)
+    else:
+        compare(args.against, args.repeats, args.quick, args.out)
 
 
 if __name__ == "__main__":

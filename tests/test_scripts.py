@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -54,3 +56,21 @@ def test_bench_steps_quick(tmp_path):
     bench = json.loads((tmp_path / "bench.json").read_text())
     assert bench["steps"] == 160 and bench["steps_per_s_at_100"] > 0
     assert bench["checkpoint_bytes"] < 100_000  # the state of a 348-element mesh, no records
+
+
+@pytest.mark.skipif(not (ROOT / ".git").exists(), reason="needs a git checkout")
+def test_bench_paper_against_the_same_revision(tmp_path):
+    # HEAD against HEAD: the same code on both sides, so the deterministic figures agree.
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "bench_paper.py"), "--quick",
+            "--repeats", "1", "--against", "HEAD", "--out", str(tmp_path),
+        ],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    comparison = json.loads((tmp_path / "compare.json").read_text())
+    current, against = comparison["summary"]["current"], comparison["summary"]["against"]
+    for key in ("fracture_time", "linear_solves", "final_elements", "energy_error_%"):
+        assert current[key] is not None and current[key] == against[key]
+    assert {r["ngat"] for r in comparison["runs"]["current"]} == {str(ROOT / "ngat")}
+    assert "| fracture time |" in (tmp_path / "compare.md").read_text()
