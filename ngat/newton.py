@@ -187,8 +187,11 @@ class NewtonSolver:
             el.ravel(), weights=np.repeat(area * energy / 3, 3), minlength=arrays.nv
         )
         surface = model.surface
+        # 2 G_c m (q v − f) written as −2 G_c m (q (1 − v) + f − q): for AT2 (f = q) the
+        # rounding of the paper's −2 G_c α m (1 − v), so anti-plane runs repeat bit for bit.
         g_v = 2 * (
-            strain * v + model.gc * arrays.mass * (surface.reaction * v - surface.source)
+            strain * v - model.gc * surface.reaction * arrays.mass * (1 - v)
+            - model.gc * (surface.source - surface.reaction) * arrays.mass
             + model.gc * surface.diffusion
             * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
         )  # fmt: skip
