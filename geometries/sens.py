@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from ngsolve import CF
 
-from ngat.geometries.sent import GC, LENGTH_SCALE, POISSON, SLITS, YOUNG, geometry
+from ngat.geometries import sent
 from ngat.scene import Scene
 
 TIMES = np.round(np.concatenate([np.arange(0, 81, 10), np.arange(85, 201, 5)]) * 1e-4, 12)
@@ -30,18 +30,10 @@ stably under shear, so the steps stay small past the peak)."""
 scene = Scene(
     name="sens",
     description="single-edge notched shear, plane strain, volumetric-deviatoric split (Miehe 2010)",
-    geometry=geometry,
+    geometry=sent.geometry,
     loads={"bottom": lambda t: CF((0, 0)), "top": lambda t: CF((t, 0))},
     times=TIMES,
-    slits=SLITS,
-    parameters={
-        "model": "plane_strain",
-        "young": YOUNG,
-        "poisson": POISSON,
-        "gc": GC,
-        "split": "voldev",
-        "eps": LENGTH_SCALE / 2,
-        "maxh": 0.05,
-    },
-    quick={"eps": 0.015 / 2, "band_h": 0.35, "floor": 0.08},
+    slits=sent.SLITS,
+    parameters={**sent.scene.parameters, "split": "voldev"},
+    quick=sent.scene.quick,
 )
