@@ -34,6 +34,7 @@ __all__ = [
     "a_form",
     "b_form",
     "mesh_edges",
+    "unique_keys",
     "MeshArrays",
     "LumpedAssembler",
 ]
@@ -118,6 +119,28 @@ def b_form(
     return form
 
 
+def unique_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the sorted distinct keys and the position of every key among them.
+
+    The same as ``np.unique(keys, return_inverse=True)`` for integer keys, by one sort: on the
+    millions of keys of a sparsity graph several times faster than ``np.unique`` without
+    ``return_inverse`` (a hash table, then a sort) followed by ``np.searchsorted``.
+
+    Parameters
+    ----------
+    keys
+        (n,) integer keys.
+    """
+    order = np.argsort(keys)
+    ordered = keys[order]
+    first = np.empty(len(keys), dtype=bool)
+    first[:1] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=first[1:])
+    position = np.empty(len(keys), dtype=np.int64)
+    position[order] = np.cumsum(first) - 1
+    return ordered[first], position
+
+
 def mesh_edges(elements: np.ndarray) -> np.ndarray:
     """Return the unique edges of a triangle mesh, shape (n_edges, 2), smaller vertex first.
 
@@ -127,7 +150,9 @@ def mesh_edges(elements: np.ndarray) -> np.ndarray:
         (ne, 3) vertex numbers of the triangles.
     """
     edges = np.sort(elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(edges, axis=0)
+    size = int(elements.max(initial=-1)) + 1
+    keys = unique_keys(edges[:, 0].astype(np.int64) * size + edges[:, 1])[0]
+    return np.stack([keys // size, keys % size], axis=1)
 
 
 def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from ngsolve.la import SparseMatrixd
 from scipy.linalg import eigh_tridiagonal
 
 from ngat.elasticity import AntiPlane, Elasticity
-from ngat.forms import lumped_dx
+from ngat.forms import lumped_dx, unique_keys
 from ngat.parameters import ModelParameters, ParameterError
 from ngat.state import ATState, lumped_energies
 
@@ -153,13 +153,12 @@ class NewtonSolver:
                 (vu_cols * size + vu_rows).ravel(),
             ]
         )
-        graph = np.unique(local)
+        graph, self.position = unique_keys(local)
         self.nnz = len(graph)
         self.entry_rows, self.entry_cols = graph // size, graph % size
         self.matrix = SparseMatrixd.CreateFromCOO(
             self.entry_rows, self.entry_cols, np.ones(self.nnz), size, size
         )
-        self.position = np.searchsorted(graph, local)
         self.diagonal = np.searchsorted(graph, np.arange(size) * (size + 1))
         self.inverse = None
         self.certified = 0.0

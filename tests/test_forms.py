@@ -133,3 +133,13 @@ def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
     positive = consistent[off][consistent[off] > 0]
     assert len(positive) == 2 * 36
     np.testing.assert_allclose(positive, 2 * arrays.area[0] / 12 * alpha, rtol=1e-12)
+
+
+def test_unique_keys_is_numpys_unique_with_inverse():
+    from ngat.forms import unique_keys
+
+    keys = np.random.default_rng(1).integers(0, 1000, size=10_000)
+    distinct, position = unique_keys(keys)
+    expected, inverse = np.unique(keys, return_inverse=True)
+    np.testing.assert_array_equal(distinct, expected)
+    np.testing.assert_array_equal(position, inverse)
