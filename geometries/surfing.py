@@ -132,6 +132,7 @@ def structured_mesh(
     band_end: float = BAND_END,
     half_width: float = BAND_HALF_WIDTH,
     grading: float = 0.3,
+    crack_length: float = CRACK_LENGTH,
 ) -> Mesh:
     """Return a tensor-product triangle mesh of the strip with a true slit and the frame Ω_D.
 
@@ -149,14 +150,16 @@ def structured_mesh(
     grading
         Growth of the cell side per unit distance from the band (cells grow by about
         1 + grading per cell).
+    crack_length
+        a₀, the slit's length (a multiple of ``h_band``).
 
     Returns
     -------
     ngsolve.Mesh
         Materials ``frame`` (Ω_D) and ``body``; boundaries ``outer`` and ``slit``. Each node of
-        the pre-crack [0, a₀) × {0}, mouth included, has a twin for the upper face.
+        the slit [0, a₀) × {0}, mouth included, has a twin for the upper face.
     """
-    half, d, a0 = HEIGHT / 2, FRAME, CRACK_LENGTH
+    half, d, a0 = HEIGHT / 2, FRAME, crack_length
     if h_band is None:
         h_band = maxh
         x_lo, x_hi, w = a0, a0, 0.0
@@ -309,6 +312,89 @@ def onset(amplitude_sq, tip_x) -> float:
 
     candidates = np.linspace(a2[2], a2[-3], 500)
     return float(candidates[np.argmin([misfit(b) for b in candidates])])
+
+
+def energy_release_rate(
+    crack_length: float,
+    tip_x: float,
+    amplitude: float = 1.0,
+    h: float = 0.0025,
+    radii: tuple[float, float] = (0.02, 0.06),
+) -> float:
+    """Return Griffith's G of the sharp crack [0, a] × {0} in the strip under the tip field.
+
+    The crack is a true slit, v ≡ 1, and u = U (amplitude A, tip field about ``tip_x``) on the
+    frame. For the energy ∫|∇u|², G = −dE/da is the domain J-integral
+
+        G = ∫ (2 ∂ₓu ∇u·∇q − |∇u|² ∂ₓq) dx,
+
+    q = 1 within ``radii[0]`` of the crack tip, 0 beyond ``radii[1]``, linear in between. With
+    the crack tip at the field's (a = ``tip_x``) the field U solves the problem and G = A².
+
+    Parameters
+    ----------
+    crack_length
+        a (a multiple of ``h``).
+    tip_x
+        x of the imposed tip field.
+    amplitude
+        A.
+    h
+        Cell side of the structured band along the crack (:func:`structured_mesh`).
+    radii
+        Inner and outer radius of the cut-off q.
+    """
+    from ngsolve import H1, BilinearForm, BitArray, GridFunction, Integrate, dx, grad
+
+    mesh = structured_mesh(
+        0.05, h_band=h, band_end=crack_length + 4 * radii[1], half_width=radii[1] + 2 * h,
+        crack_length=crack_length,
+    )  # fmt: skip
+    fes = H1(mesh, order=1)
+    trial, test = fes.TnT()
+    stiffness = BilinearForm(grad(trial) * grad(test) * dx).Assemble().mat
+    u = GridFunction(fes)
+    u.Set(tip_field(amplitude, tip_x), definedon=mesh.Materials("frame"))
+    free = BitArray(fes.FreeDofs()) & ~fes.GetDofs(mesh.Materials("frame"))
+    u.vec.data += stiffness.Inverse(free, inverse="sparsecholesky") * (-stiffness * u.vec)
+    r = sqrt((x - crack_length) ** 2 + y * y)
+    inner, outer = radii
+    q = GridFunction(fes)
+    q.Set(IfPos(r - outer, 0, IfPos(r - inner, (outer - r) / (outer - inner), 1)))
+    gu, gq = grad(u), grad(q)
+    integrand = 2 * gu[0] * (gu * gq) - (gu * gu) * gq[0]
+    return float(Integrate(integrand, mesh, definedon=mesh.Materials("body")))
+
+
+def griffith_lead(tip_x: float, toughness: float, amplitude: float, h: float = 0.0025) -> float:
+    """Return Griffith's steady lead ℓ of the crack tip over the imposed tip at ``tip_x``.
+
+    ℓ solves G(tip_x + ℓ; tip_x) = G_c (:func:`energy_release_rate`; G decreases with ℓ), by
+    the secant method on crack lengths rounded to the band's grid ``h``.
+
+    Parameters
+    ----------
+    tip_x
+        x of the imposed tip.
+    toughness
+        G_c of the crack.
+    amplitude
+        A.
+    h
+        Cell side of the band, and the resolution of ℓ.
+    """
+
+    def misfit(lead):
+        return energy_release_rate(tip_x + lead, tip_x, amplitude, h) - toughness
+
+    a, b = 0.0, 0.1
+    fa, fb = misfit(a), misfit(b)
+    while abs(b - a) > h / 2:
+        a, fa, b = b, fb, round((b - fb * (b - a) / (fb - fa)) / h) * h
+        if b == a:
+            break
+        fb = misfit(b)
+    return b
 
 
 def steady_rates(times, tip_x, surface) -> dict[str, float]:

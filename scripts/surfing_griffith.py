@@ -161,7 +161,9 @@ def steady_propagation(
     Returns
     -------
     dict
-        ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff, ``g_eff``,
+        ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff,
+        ``tip_g_drift`` = relative change over the window of Griffith's G of a sharp crack
+        ending at the measured tip (:func:`ngat.geometries.surfing.energy_release_rate`), ``g_eff``,
         ``lead`` (crack tip − imposed tip at the end), ``wall_s`` and the run's records.
     """
     dt = advance_per_step * (h or eps) / speed
@@ -185,9 +187,16 @@ def steady_propagation(
     last = records[-1]
     h = h or band_size(window)
     g_eff = surfing.effective_toughness(h, eps)
+    # Griffith's G of a sharp crack ending at the measured tip, at the window's ends: a crack
+    # of constant toughness keeps it constant.
+    tip_g = [
+        surfing.energy_release_rate(r["tip1_x"], start + speed * r["t"])
+        for r in (window[0], window[-1])
+    ]
     return {
         "speed_ratio": rates["speed"] / speed,
         "toughness_ratio": rates["toughness"] / g_eff,
+        "tip_g_drift": tip_g[1] / tip_g[0] - 1,
         "g_eff": g_eff,
         "h": h,
         "elements": last["elements"],
@@ -237,6 +246,7 @@ def main() -> None:
              "a_c_sq_over_g_eff": round(a["ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
              "speed_over_V": round(b["speed_ratio"], 4),
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),
+             "tip_g_drift": round(b["tip_g_drift"], 4),
              "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
              "steps": args.steps, "skip": args.skip}
         )  # fmt: skip
