@@ -49,11 +49,14 @@ def test_work_precision_quick(tmp_path):
     script("work_precision.py", "--quick", "--scenes", "surfing", "--out", tmp_path)
     with open(tmp_path / "work_precision.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [(r["method"], float(r["value"])) for r in rows] == [("adaptive", 0.6), ("uniform", 0.2)]
+    assert [(r["method"], float(r["value"])) for r in rows] == [("adaptive", 0.36), ("uniform", 0.2)]
     for r in rows:
         assert float(r["wall_s"]) > 0 and float(r["peak_memory_mb"]) > 50
         assert np.isfinite(float(r["energy_1.0"])) and np.isfinite(float(r["crack_path"]))
     assert (tmp_path / "work_precision.png").stat().st_size > 10_000
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [entry["measure"] for entry in summary["speedups"]] == ["energy_1.0"]
+    assert summary["speedups"][0]["uniform_h"] == 0.2
 
 
 def test_hausdorff_distance_of_tip_tracks():
