@@ -76,13 +76,32 @@ def make_scene(
     ramp: float = RAMP,
     eps: float = EPS,
     times=TIMES,
+    tip_start: float = CRACK_LENGTH,
     name: str = "surfing-mode-i",
 ) -> Scene:
-    """Return a mode-I surfing scene (see the module docstring for the parameters)."""
+    """Return a mode-I surfing scene (see the module docstring for the parameters).
+
+    Parameters
+    ----------
+    amplitude
+        A = sqrt(G).
+    speed
+        V, speed of the imposed tip; 0 keeps it where it starts.
+    ramp
+        A(t) = A · min(1, t / ramp); 0: the full amplitude from the start.
+    eps
+        ε.
+    times
+        Load times.
+    tip_start
+        x of the imposed tip at t = 0 (default a₀).
+    name
+        Scene name.
+    """
 
     def load(t: Parameter):
         scale = IfPos(t - ramp, 1.0, t / ramp) if ramp > 0 else 1.0
-        return tip_field(amplitude * scale, CRACK_LENGTH + speed * t)
+        return tip_field(amplitude * scale, tip_start + speed * t)
 
     return Scene(
         name=name,

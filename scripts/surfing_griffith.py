@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ngat.driver import run
-from ngat.geometries import surfing
+from ngat.geometries import surfing, surfing_mode_i
 from ngat.parameters import Parameters
 
 R = surfing.HEIGHT / 2 - surfing.FRAME
@@ -65,8 +65,27 @@ def adaptive_overrides(eps: float, h: float | None, overrides: dict) -> dict:
     return {"maxh": MAXH_OVER_EPS * eps, **overrides}
 
 
+def adaptive_scene(mode: str, **kwargs):
+    """Return the unstructured surfing scene of ``mode``: "iii" (anti-plane) or "i" (plane strain).
+
+    The mode-I scene (``geometries/surfing_mode_i.py``) has Williams' K_I field with G = A² and
+    is meshed by Netgen only; ``kwargs`` are those of :func:`ngat.geometries.surfing.make_scene`.
+    """
+    if mode == "iii":
+        return surfing.make_scene(**kwargs, structured=False)
+    for key in ("h_band", "band_end", "half_width"):
+        kwargs.pop(key)
+    return surfing_mode_i.make_scene(**{**kwargs, "name": kwargs["name"] + "-mode-i"})
+
+
 def critical_amplitude(
-    eps: float, h: float, folder: Path, span=(0.88, 1.12), steps: int = 25, **overrides
+    eps: float,
+    h: float,
+    folder: Path,
+    span=(0.88, 1.12),
+    steps: int = 25,
+    mode: str = "iii",
+    **overrides,
 ) -> dict:
     """Ramp A with the tip field fixed at the pre-crack's tip; return A_c² against G_eff(h).
 
@@ -80,6 +99,8 @@ def critical_amplitude(
         Results folder of the run.
     span
         Range of A² / G_eff(h) covered, in ``steps`` load steps equally spaced in A².
+    mode
+        "iii" (anti-plane) or "i" (plane strain; adaptive runs only, :func:`adaptive_scene`).
     overrides
         Further parameters of the run (``am_tol``, ...).
 
@@ -93,11 +114,11 @@ def critical_amplitude(
     )
     top = float(amplitude[-1])
     # A(t) = t: amplitude A_max reached at t = ramp = A_max.
-    scene = surfing.make_scene(
+    kwargs = dict(
         amplitude=top, speed=0.0, ramp=top, eps=eps, h_band=h, times=np.round(amplitude, 12),
         band_end=surfing.CRACK_LENGTH + 0.15 * R, half_width=6 * eps, name="surfing-critical",
-        structured=h is not None,
     )  # fmt: skip
+    scene = surfing.make_scene(**kwargs) if h else adaptive_scene(mode, **kwargs)
     parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
     result = run(scene, parameters, times, folder)
@@ -128,6 +149,7 @@ def steady_propagation(
     skip: int = 9,
     lag: float = 0.0,
     ramp: float = 0.05,
+    mode: str = "iii",
     **overrides,
 ) -> dict:
     """Drive the crack with A² = 1.2 G_eff(h) at speed V; return its speed and toughness.
@@ -155,6 +177,8 @@ def steady_propagation(
     ramp
         Time over which the amplitude is ramped in; a slow ramp lets the crack settle at the
         steady lead instead of overshooting it.
+    mode
+        "iii" (anti-plane) or "i" (plane strain; adaptive runs only, :func:`adaptive_scene`).
     overrides
         Further parameters of the run.
 
@@ -169,14 +193,15 @@ def steady_propagation(
     dt = advance_per_step * (h or eps) / speed
     times = np.round(dt * np.arange(1, steps + 1), 12)
     start = surfing.CRACK_LENGTH - lag
-    scene = surfing.make_scene(
+    kwargs = dict(
         amplitude=np.sqrt(
             surfing.OVERLOAD * surfing.effective_toughness(h or nominal_band(eps), eps)
         ),
         speed=speed, ramp=ramp, eps=eps, h_band=h, times=times, tip_start=start,
         band_end=start + speed * times[-1] + 0.25 * R, half_width=6 * eps,
-        name="surfing-steady", structured=h is not None,
+        name="surfing-steady",
     )  # fmt: skip
+    scene = surfing.make_scene(**kwargs) if h else adaptive_scene(mode, **kwargs)
     parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
     records = run(scene, parameters, times, folder).records
@@ -189,10 +214,14 @@ def steady_propagation(
     g_eff = surfing.effective_toughness(h, eps)
     # Griffith's G of a sharp crack ending at the measured tip, at the window's ends: a crack
     # of constant toughness keeps it constant.
-    tip_g = [
-        surfing.energy_release_rate(r["tip1_x"], start + speed * r["t"])
-        for r in (window[0], window[-1])
-    ]
+    tip_g = (
+        [
+            surfing.energy_release_rate(r["tip1_x"], start + speed * r["t"])
+            for r in (window[0], window[-1])
+        ]
+        if mode == "iii"
+        else [np.nan, np.nan]
+    )
     return {
         "speed_ratio": rates["speed"] / speed,
         "toughness_ratio": rates["toughness"] / g_eff,
@@ -222,6 +251,10 @@ def main() -> None:
     parser.add_argument("--skip", type=int, default=9, help="steps of (b) left out of the fit")
     parser.add_argument("--cases", nargs="+", default=None, help="R/eps:h/eps pairs, e.g. 400:1")
     parser.add_argument(
+        "--mode", choices=["iii", "i"], default="iii",
+        help="anti-plane (iii) or plane-strain (i) surfing; mode i with --adaptive only",
+    )  # fmt: skip
+    parser.add_argument(
         "--adaptive", type=float, nargs="+", default=None, metavar="R/EPS",
         help="adaptive runs (adapt=band defaults, unstructured mesh of maxh = 10 eps) instead",
     )  # fmt: skip
@@ -236,8 +269,11 @@ def main() -> None:
         eps = R / ratio
         h = h_over_eps * eps if h_over_eps else None
         tag = f"R{ratio:g}_h{h_over_eps:g}" if h else f"R{ratio:g}_adaptive"
-        a = critical_amplitude(eps, h, args.out / f"critical_{tag}")
-        b = steady_propagation(eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip)
+        tag += "" if args.mode == "iii" else "_mode_i"
+        a = critical_amplitude(eps, h, args.out / f"critical_{tag}", mode=args.mode)
+        b = steady_propagation(
+            eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, mode=args.mode
+        )
         rows.append(
             {"R_over_eps": ratio, "mesh": "structured" if h else "adaptive",
              "h_over_eps (a)": round(a["h"] / eps, 4), "h_over_eps (b)": round(b["h"] / eps, 4),
