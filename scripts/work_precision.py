@@ -227,7 +227,6 @@ def plot(rows: list[dict], path: Path) -> None:
                         textcoords="offset points",
                     )  # fmt: skip
             ax.xaxis.set_minor_formatter(NullFormatter())
-            ax.yaxis.set_minor_formatter(NullFormatter())
             ax.set_title(f"{scene}: {measure}", fontsize=9)
             ax.set_xlabel("wall time [s]", fontsize=8)
             if ax.has_data():
@@ -325,7 +324,8 @@ def main(argv: list[str] | None = None) -> None:
         row.update(errors(scene, case, reference))
         rows.append(row)
     with open(args.out / "work_precision.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        # Each scene has its own measures: the columns are their union, blank where absent.
+        writer = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
         writer.writeheader()
         writer.writerows(rows)
     plot(rows, args.out / "work_precision.png")
