@@ -314,7 +314,7 @@ def onset(amplitude_sq, tip_x) -> float:
     return float(candidates[np.argmin([misfit(b) for b in candidates])])
 
 
-def energy_release_rate(
+def sharp_crack_release_rate(
     crack_length: float,
     tip_x: float,
     amplitude: float = 1.0,
@@ -369,7 +369,7 @@ def energy_release_rate(
 def griffith_lead(tip_x: float, toughness: float, amplitude: float, h: float = 0.0025) -> float:
     """Return Griffith's steady lead ℓ of the crack tip over the imposed tip at ``tip_x``.
 
-    ℓ solves G(tip_x + ℓ; tip_x) = G_c (:func:`energy_release_rate`; G decreases with ℓ), by
+    ℓ solves G(tip_x + ℓ; tip_x) = G_c (:func:`sharp_crack_release_rate`; G decreases with ℓ), by
     the secant method on crack lengths rounded to the band's grid ``h``.
 
     Parameters
@@ -385,7 +385,7 @@ def griffith_lead(tip_x: float, toughness: float, amplitude: float, h: float = 0
     """
 
     def misfit(lead):
-        return energy_release_rate(tip_x + lead, tip_x, amplitude, h) - toughness
+        return sharp_crack_release_rate(tip_x + lead, tip_x, amplitude, h) - toughness
 
     a, b = 0.0, 0.1
     fa, fb = misfit(a), misfit(b)
