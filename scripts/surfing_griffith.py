@@ -187,7 +187,8 @@ def steady_propagation(
     dict
         ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff,
         ``tip_g_drift`` = relative change over the window of Griffith's G of a sharp crack
-        ending at the measured tip (:func:`ngat.geometries.surfing.sharp_crack_release_rate`), ``g_eff``,
+        ending at the measured tip (:func:`~ngat.geometries.surfing.sharp_crack_release_rate`),
+        ``g_eff``,
         ``lead`` (crack tip − imposed tip at the end), ``wall_s`` and the run's records.
     """
     dt = advance_per_step * (h or eps) / speed
