@@ -78,6 +78,25 @@ def adaptive_scene(mode: str, **kwargs):
     return surfing_mode_i.make_scene(**{**kwargs, "name": kwargs["name"] + "-mode-i"})
 
 
+def release_rates(folder: Path, eps: float, eta: float) -> list[float]:
+    """Return J (:func:`ngat.geometries.surfing.energy_release_rate`) at each written step.
+
+    Reads ``fields/step_*.vtu`` of a results folder (written at every step by default).
+    """
+    import pyvista
+
+    rates = []
+    for path in sorted((Path(folder) / "fields").glob("step_*.vtu")):
+        grid = pyvista.read(path)
+        cells = np.asarray(grid.cells).reshape(-1, 4)[:, 1:]
+        rates.append(
+            surfing.energy_release_rate(
+                grid.points, cells, grid.point_data["u"], grid.point_data["v"], eps, eta
+            )
+        )
+    return rates
+
+
 def critical_amplitude(
     eps: float,
     h: float,
@@ -85,6 +104,7 @@ def critical_amplitude(
     span=(0.88, 1.12),
     steps: int = 25,
     mode: str = "iii",
+    band_length: float = 0.15,
     **overrides,
 ) -> dict:
     """Ramp A with the tip field fixed at the pre-crack's tip; return A_c² against G_eff(h).
@@ -101,13 +121,28 @@ def critical_amplitude(
         Range of A² / G_eff(h) covered, in ``steps`` load steps equally spaced in A².
     mode
         "iii" (anti-plane) or "i" (plane strain; adaptive runs only, :func:`adaptive_scene`).
+    band_length
+        Length of a structured band beyond a₀, in units of R (room for 10ε of growth and
+        more at R/ε ≥ 100 needs 0.35; the default keeps the A_c² checks' meshes).
     overrides
         Further parameters of the run (``am_tol``, ...).
 
     Returns
     -------
     dict
-        ``a_c_sq``, ``g_eff``, ``ratio`` = A_c² / G_eff, ``wall_s`` and the run's records.
+        ``a_c_sq``, ``g_eff``, ``ratio`` = A_c² / G_eff, ``wall_s`` and the run's records;
+        ``release_rates`` (J per step), ``j_c`` (:func:`~ngat.geometries.surfing.
+        griffith_toughness`: J over the steps whose crack has grown 10ε or more) and
+        ``j_ratio`` = J_c / G_eff, Griffith's check on the energy release rate the crack
+        grows at. A² overstates that rate (AT2 softens the whole body, J/A² ≈ 0.90 at
+        R/ε = 100 before the crack moves), so A_c² is late by a bias of order ε/R; and the
+        break point of a smooth creep curve depends on the span. J_c needs a span that
+        reaches growth: up to 1.6 G_eff at R/ε = 100, 1.2 at R/ε = 200 (else NaN).
+
+    Notes
+    -----
+    A structured band ends at a₀ + ``band_length`` R; steps beyond 5ε before its end are left
+    out of J_c: the coarse elements there hold the crack back.
     """
     amplitude = np.sqrt(
         surfing.effective_toughness(h or nominal_band(eps), eps) * np.linspace(*span, steps)
@@ -116,7 +151,8 @@ def critical_amplitude(
     # A(t) = t: amplitude A_max reached at t = ramp = A_max.
     kwargs = dict(
         amplitude=top, speed=0.0, ramp=top, eps=eps, h_band=h, times=np.round(amplitude, 12),
-        band_end=surfing.CRACK_LENGTH + 0.15 * R, half_width=6 * eps, name="surfing-critical",
+        band_end=surfing.CRACK_LENGTH + band_length * R, half_width=6 * eps,
+        name="surfing-critical",
     )  # fmt: skip
     scene = surfing.make_scene(**kwargs) if h else adaptive_scene(mode, **kwargs)
     parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
@@ -125,9 +161,21 @@ def critical_amplitude(
     records = result.records
     a_c_sq = surfing.onset([r["t"] ** 2 for r in records], [r["tip1_x"] for r in records])
     grown = [r for r in records if r["t"] ** 2 > a_c_sq]
+    structured = h is not None
     h = h or band_size(grown)
     g_eff = surfing.effective_toughness(h, eps)
+    # The J-integral is written for the anti-plane energy.
+    rates = (
+        release_rates(folder, eps, parameters.model.eta)
+        if mode == "iii"
+        else [np.nan] * len(records)
+    )
+    end = surfing.CRACK_LENGTH + band_length * R - 5 * eps if structured else None
+    j_c = surfing.griffith_toughness(rates, [r["tip1_x"] for r in records], eps, end=end)
     return {
+        "release_rates": rates,
+        "j_c": j_c,
+        "j_ratio": j_c / g_eff,
         "a_c_sq": a_c_sq,
         "g_eff": g_eff,
         "h": h,
