@@ -114,20 +114,36 @@ def test_steady_crack_follows_the_tip_field_and_spends_g_eff(tmp_path):
     assert 0 < result["lead"] < 0.2
 
 
-def test_adaptive_run_from_a_coarse_unstructured_mesh_starts_the_crack_at_g_eff(tmp_path):
+def test_adaptive_crack_grows_at_the_energy_release_rate_g_eff(tmp_path):
     # The coarse variant of the adaptive Griffith check: no band pre-refined along the path, an
-    # unstructured initial mesh of 10ε (R/ε = 100), adapt=band defaults, the amplitude ramped
-    # with the tip field fixed. The crack must start near G_eff of the band it runs in (at most
-    # ε/4 wide) and run, not stay put in the initial elements.
+    # unstructured initial mesh of 10ε (R/ε = 50), adapt=band defaults, the amplitude ramped
+    # with the tip field fixed. Griffith: the crack grows when, and while, the energy release
+    # rate of the discrete solution (J) equals the toughness of the band it runs in, at most
+    # ε/4 wide. Measured J_c = 0.992 G_eff (h = 0.079ε, 66k elements, 23ε of growth); the
+    # applied A² overstates J by the diffuse damage of AT2 (J/A² = 0.78 before the crack moves
+    # at this R/ε), which is why A_c² is not the measure (docs/adaptivity.md).
     script = griffith_script()
-    eps = script.R / 100
-    result = script.critical_amplitude(eps, None, tmp_path / "critical")
+    eps = script.R / 50
+    result = script.critical_amplitude(eps, None, tmp_path / "critical", span=(0.88, 1.8), steps=16)
     assert 0 < result["h"] <= eps / 4
-    # Measured 1.051 (h = 0.076ε, 36k elements); 1.056 at R/ε = 200 (docs/adaptivity.md): the
-    # adaptive onset lies 5 % above G_eff where the structured band gives 1.005.
-    assert abs(result["ratio"] - 1) < 0.08, result["ratio"]
+    assert abs(result["j_ratio"] - 1) < 0.03, result["j_ratio"]
     tips = [r["tip1_x"] for r in result["records"]]
-    assert tips[-1] - tips[0] > 4 * eps, "the crack should grow"  # measured 6ε
+    assert tips[-1] - tips[0] > 15 * eps, "the crack should grow"  # measured 23ε
+
+
+def test_discrete_release_rate_of_the_tip_field_is_a_squared():
+    # v ≡ 1 and u the discrete solution under U on the frame, crack tip at the field's: the
+    # domain J-integral of the discrete energy is Griffith's G = A² (U solves the problem;
+    # measured 1.011 A², the P1 error on the annulus 0.27–0.48 where the mesh is graded).
+    mesh = surfing.structured_mesh(0.05, h_band=0.0025, band_end=1.2, half_width=0.05)
+    state = ATState(mesh, ModelParameters(eps=0.01), {"frame": lambda t: surfing.tip_field(t, 0.6)})
+    state.apply_load(1.2)
+    HalfStepSolvers(state).solve_u()
+    arrays = state.arrays
+    j = surfing.energy_release_rate(
+        arrays.coords, arrays.elements, state.u_values, state.v_values, 0.01, state.model.eta
+    )
+    assert j / 1.2**2 == pytest.approx(1.0, abs=0.02)
 
 
 def test_energy_release_rate_of_the_sharp_crack_is_griffiths():
