@@ -445,7 +445,7 @@ def energy_release_rate(
         rhs = np.stack([local[:, 1] - local[:, 0], local[:, 2] - local[:, 0]], axis=1)
         return np.linalg.solve(edges, rhs[:, :, None])[:, :, 0]
 
-    area = 0.5 * np.abs(np.cross(edges[:, 0], edges[:, 1]))
+    area = 0.5 * np.abs(edges[:, 0, 0] * edges[:, 1, 1] - edges[:, 0, 1] * edges[:, 1, 0])
     grad_u, grad_v = gradient(u), gradient(v)
     offset = corners.mean(axis=1) - np.asarray(centre)
     r = np.hypot(offset[:, 0], offset[:, 1])
