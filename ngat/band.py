@@ -156,7 +156,6 @@ class CrackBand:
         elements: np.ndarray,
         damaged: np.ndarray,
         tips: np.ndarray,
-        reach: float = 1.0,
     ) -> np.ndarray:
         """Return the elements wider than the target within the band around the centres.
 
@@ -166,8 +165,6 @@ class CrackBand:
             Vertex coordinates and element vertex numbers of the current mesh.
         damaged, tips
             The centres of :meth:`centres`.
-        reach
-            Fraction of the radii ``BUFFER · ε`` and ``TIP_RADIUS · ε`` to look within.
         """
         diameter = element_diameters(coords, elements)
         coarse = np.flatnonzero(diameter > self.target)
@@ -175,10 +172,32 @@ class CrackBand:
         if len(coarse) == 0:
             return marked
         elements, diameter = elements[coarse], diameter[coarse]
-        near = band_elements(coords, elements, diameter, damaged, reach * BUFFER * self.eps)
-        near |= band_elements(coords, elements, diameter, tips, reach * TIP_RADIUS * self.eps)
+        near = band_elements(coords, elements, diameter, damaged, BUFFER * self.eps)
+        near |= band_elements(coords, elements, diameter, tips, TIP_RADIUS * self.eps)
         marked[coarse[near]] = True
         return marked
+
+    def triggered(
+        self, coords: np.ndarray, elements: np.ndarray, damaged: np.ndarray, tips: np.ndarray
+    ) -> bool:
+        """Return whether any of the (marked) elements lies within ``trigger`` times the radii.
+
+        Parameters
+        ----------
+        coords
+            Vertex coordinates of the current mesh.
+        elements
+            Vertex numbers of the elements :meth:`marked` returned (the trigger's reach lies
+            inside the band's, so no other element can trigger).
+        damaged, tips
+            The centres of :meth:`centres`.
+        """
+        diameter = element_diameters(coords, elements)
+        reach = self.trigger * self.eps
+        return bool(
+            band_elements(coords, elements, diameter, damaged, reach * BUFFER).any()
+            or band_elements(coords, elements, diameter, tips, reach * TIP_RADIUS).any()
+        )
 
     def refine(self, state: ATState) -> int:
         """Bisect the band until no element in it is wider than the target, if it needs it.
@@ -201,14 +220,14 @@ class CrackBand:
         """
         damaged, centres = self.centres(state)
         coords, elements = state.arrays.coords, state.arrays.elements
-        if not self.marked(coords, elements, damaged, centres, self.trigger).any():
+        marked = self.marked(coords, elements, damaged, centres)
+        if not self.triggered(coords, elements[marked], damaged, centres):
             return 0
         rounds = 0
-        while rounds < MAX_ROUNDS and bisect(
-            state, self.marked(coords, elements, damaged, centres)
-        ):
+        while rounds < MAX_ROUNDS and bisect(state, marked):
             rounds += 1
             coords, elements = mesh_geometry(state.mesh)
+            marked = self.marked(coords, elements, damaged, centres)
         if rounds:
             rebuild(state)
             log.debug("crack band: %d rounds, %d elements", rounds, state.arrays.ne)
