@@ -72,6 +72,15 @@ class Elasticity:
         """Return s(u) : ∇φ as a CoefficientFunction of trial/test functions or GridFunctions."""
         raise NotImplementedError
 
+    def component_bilinear(self, i: int, u, phi) -> ngsolve.CoefficientFunction:
+        """Return s(u eᵢ) : ∇(φ eᵢ) for scalar u, φ: the i-th diagonal block of the bilinear.
+
+        The block-diagonal part of the u-step's operator, whose blocks are scalar forms that
+        ``h1amg`` accepts (:class:`ngat.linear.AMGConjugateGradient`); by Korn's inequality it
+        is spectrally equivalent to the whole operator.
+        """
+        raise NotImplementedError
+
     def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
         """Return the DOF numbers of u on each element, shape (ne, 3 · components)."""
         raise NotImplementedError
@@ -145,6 +154,10 @@ class AntiPlane(Elasticity):
         """Return ∇u·∇φ."""
         return grad(u) * grad(phi)
 
+    def component_bilinear(self, i: int, u, phi) -> ngsolve.CoefficientFunction:
+        """Return ∇u·∇φ (one component: the whole bilinear)."""
+        return grad(u) * grad(phi)
+
     def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
         """Return the element vertices (P1 DOF = vertex)."""
         return arrays.elements
@@ -190,6 +203,12 @@ class PlaneElasticity(Elasticity):
         return self.mu * InnerProduct(Sym(grad(u)), Sym(grad(phi))) + self.lam / 2 * Trace(
             grad(u)
         ) * Trace(grad(phi))
+
+    def component_bilinear(self, i: int, u, phi) -> ngsolve.CoefficientFunction:
+        """Return μ/2 ∇u·∇φ + (μ + λ)/2 ∂ᵢu ∂ᵢφ, the bilinear of u eᵢ and φ eᵢ."""
+        return (
+            self.mu / 2 * grad(u) * grad(phi) + (self.mu + self.lam) / 2 * grad(u)[i] * grad(phi)[i]
+        )
 
     def element_dofs(self, arrays: MeshArrays) -> np.ndarray:
         """Return (x₀, x₁, x₂, y₀, y₁, y₂): vertex numbers, then vertex numbers + nv."""

@@ -5,7 +5,8 @@ The u-step minimises I_j(·, v) over g(t_k) + X_{j,D}, the v-step I_j(u, ·) ove
 the matrices of a_j and b_j in place (:meth:`ngat.state.ATState.assemble_a`,
 :meth:`~ngat.state.ATState.assemble_b`) and solves with :mod:`ngat.linear`: per mesh, a sparse
 Cholesky factorisation refreshed with ``Inverse.Update()``, which keeps the symbolic analysis,
-or, with ``linear_solver="cg-h1amg"``, CG with a rebuilt h1amg preconditioner. It owns what
+or, with ``linear_solver="cg-h1amg"``, CG with a rebuilt h1amg preconditioner (one per
+component of a vector u, :meth:`HalfStepSolvers._amg_forms`). It owns what
 outlives a solve — the factorisations, which a checkpoint keeps (:meth:`solver_state`) — and
 counts the solves (:class:`LinearStatistics`); the state holds the fields and operators only.
 
@@ -19,9 +20,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
-from ngsolve import H1
+from ngsolve import H1, BilinearForm
 
 from ngat.forms import a_form, b_form
 from ngat.linear import AMGConjugateGradient, LaggedCholesky
@@ -251,20 +253,30 @@ class HalfStepSolvers:
         matrix = state.a_matrix if stage == "u" else state.b_matrix
         if self.linear_solver == "cg-h1amg":
             if solver is None:
-                # A P1 space of its own: the solver overwrites its free DOFs.
-                space = H1(state.mesh, order=1, autoupdate=False)
-                form = (
-                    a_form(space, state.v, state.model.eta)
-                    if stage == "u"
-                    else b_form(space, state.u, state.model.surface, gc=state.model.gc)
-                )
-                return AMGConjugateGradient(form, matrix, free)
+                return AMGConjugateGradient(self._amg_forms(stage), matrix, free)
             solver.values_changed(free)
             return solver
         if solver is None or not np.array_equal(free, solver.free):
             return LaggedCholesky(matrix, free, self.max_cg)
         solver.values_changed()
         return solver
+
+    def _amg_forms(self, stage: str) -> list[BilinearForm]:
+        """Return the forms h1amg is built on: b_j, or a_j's block of each component of u.
+
+        Each on a P1 space of its own: the solver overwrites its free DOFs.
+        """
+        state = self.state
+        density = state.elasticity
+
+        def space():
+            return H1(state.mesh, order=1, autoupdate=False)
+
+        if stage == "v":
+            surface, gc = state.model.surface, state.model.gc
+            return [b_form(space(), state.u, surface, bilinear=density.bilinear, gc=gc)]
+        blocks = [partial(density.component_bilinear, i) for i in range(density.components)]
+        return [a_form(space(), state.v, state.model.eta, bilinear=block) for block in blocks]
 
     def _solve(self, solver: LaggedCholesky | AMGConjugateGradient, stage: str = "u") -> None:
         """Set the stage's correction to the solution of the system with its residual."""

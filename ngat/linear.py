@@ -12,17 +12,21 @@ preconditioned by NGSolve's algebraic multigrid ``h1amg``, rebuilt for every new
 h1amg preconditioner coarsens by weights computed from the element matrices, which it only sees
 during ``BilinearForm.Assemble()``, and it takes its free DOFs from the form's space; so each
 refresh writes the free DOFs into a P1 space reserved for the solver and assembles the form.
+h1amg accepts scalar spaces only: a vector u-step is preconditioned block by block, one h1amg
+per component on the diagonal block of its operator (block Jacobi; by Korn's inequality the
+block diagonal is spectrally equivalent to the whole elasticity operator).
 Which solver serves which half-step, and when, is :class:`ngat.halfsteps.HalfStepSolvers`.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 
 import numpy as np
-from ngsolve import BilinearForm, BitArray, Preconditioner
+from ngsolve import BilinearForm, BitArray, IntRange, Preconditioner
 from ngsolve.krylovspace import CGSolver
-from ngsolve.la import BaseVector, SparseMatrixd
+from ngsolve.la import BaseMatrix, BaseVector, Embedding, SparseMatrixd
 
 __all__ = ["LaggedCholesky", "AMGConjugateGradient"]
 
@@ -82,7 +86,9 @@ class AMGConjugateGradient:
 
     CG runs on ``matrix`` (the values the caller writes with :class:`ngat.forms.LumpedAssembler`,
     the same operator as the direct solver's); the preconditioner is built on the NGSolve
-    assembly of ``form``, which equals it to round-off (``tests/test_forms.py``). A solve that
+    assembly of ``forms``: one form equals the matrix to round-off (``tests/test_forms.py``);
+    several are the diagonal blocks of a vector operator, one per component (DOFs blocked by
+    component, as in ``VectorH1``), each with its own h1amg. A solve that
     stops at ``maxiter`` before reducing the preconditioned residual by ``tol`` keeps its last
     iterate, logs a warning and sets :attr:`converged` to ``False``; the half-step solvers count
     such solves (:class:`ngat.halfsteps.LinearStatistics`) and the run's diagnostics report them
@@ -90,10 +96,11 @@ class AMGConjugateGradient:
 
     Parameters
     ----------
-    form
-        Bilinear form of A on a P1 space reserved for this solver: its free DOFs are
-        overwritten at every refresh. Its coefficients must follow the caller's fields, so
-        that ``form.Assemble()`` gives the current values of A.
+    forms
+        Bilinear forms of A (one) or of its diagonal blocks (one per component), each on a P1
+        space reserved for this solver: their free DOFs are overwritten at every refresh. Their
+        coefficients must follow the caller's fields, so that ``Assemble()`` gives the
+        current values.
     matrix
         Sparse matrix of A, values rewritten by the caller between solves.
     free
@@ -113,15 +120,17 @@ class AMGConjugateGradient:
 
     def __init__(
         self,
-        form: BilinearForm,
+        forms: Sequence[BilinearForm],
         matrix: SparseMatrixd,
         free: np.ndarray,
         tol: float = 1e-10,
         maxiter: int = 2000,
     ):
-        self.form = form
+        self.forms = list(forms)
         self.matrix = matrix
-        self.preconditioner = Preconditioner(form, "h1amg")
+        # Registered before the first Assemble(), which builds them; composed after it.
+        self.blocks = [Preconditioner(form, "h1amg") for form in self.forms]
+        self.preconditioner: BaseMatrix | None = None
         self.free = free.copy()
         self.tol = tol
         self.maxiter = maxiter
@@ -135,12 +144,31 @@ class AMGConjugateGradient:
             self.free = free.copy()
         self.stale = True
 
+    def _compose(self) -> BaseMatrix:
+        """Return the h1amg of one form, or Σᵢ Eᵢ Pᵢ Eᵢᵀ over the component blocks."""
+        if len(self.blocks) == 1:
+            return self.blocks[0]
+        start, total = 0, None
+        for form, block in zip(self.forms, self.blocks, strict=True):
+            n = form.space.ndof
+            embedding = Embedding(self.matrix.height, IntRange(start, start + n))
+            term = embedding @ block @ embedding.T
+            total = term if total is None else total + term
+            start += n
+        return total
+
     def _rebuild(self) -> None:
-        """Write the free DOFs into the form's space and assemble: h1amg is built anew."""
-        freedofs = self.form.space.FreeDofs()
-        freedofs.Set()
-        freedofs &= BitArray(self.free)
-        self.form.Assemble()
+        """Write the free DOFs into the forms' spaces and assemble: h1amg is built anew."""
+        start = 0
+        for form in self.forms:
+            n = form.space.ndof
+            freedofs = form.space.FreeDofs()
+            freedofs.Set()
+            freedofs &= BitArray(self.free[start : start + n])
+            form.Assemble()
+            start += n
+        if self.preconditioner is None:
+            self.preconditioner = self._compose()
         self.stale = False
 
     def solve(self, rhs: BaseVector, out: BaseVector) -> None:

@@ -177,8 +177,9 @@ class SolverParameters:
         (with ``max_cg`` above), ``"cg-h1amg"`` conjugate gradients preconditioned by NGSolve's
         algebraic multigrid ``h1amg``, rebuilt for every matrix, to a relative residual of 1e−10
         within 2000 iterations (a solve that stops at the cap is reported as
-        ``linear-not-converged``, :mod:`ngat.diagnostics`). Newton steps solve their coupled
-        system directly in either case.
+        ``linear-not-converged``, :mod:`ngat.diagnostics`); for the plane models one h1amg per
+        component of u (block Jacobi), not with an energy split. Newton steps solve their
+        coupled system directly in either case.
     nonlinear
         Solver of one load step (:mod:`ngat.strategies`): ``"am"`` plain alternating
         minimisation (the paper), ``"overrelaxed"`` v ← v_old + ω(v_new − v_old),
@@ -435,10 +436,11 @@ class Parameters:
                 )
         for group in self._groups().values():
             group.check()
-        if self.model.model != "antiplane" and self.solver.linear_solver != "direct":
+        if self.model.split != "none" and self.solver.linear_solver != "direct":
             raise ParameterError(
-                f"linear_solver={self.solver.linear_solver} is scalar (h1amg refuses vector "
-                f"spaces): model={self.model.model} needs linear_solver=direct"
+                f"linear_solver={self.solver.linear_solver} preconditions the u-step with the "
+                f"degraded operator, which split={self.model.split} leaves intact in "
+                "compression: choose linear_solver=direct with a split"
             )
         if (
             self.model.crack_density == "at1"

@@ -134,7 +134,6 @@ def test_scalar_load_on_a_plane_model_is_refused():
         ({"poisson": 0.5}, "poisson"),
         ({"young": -1.0}, "young"),
         ({"gc": 0.0}, "gc"),
-        ({"model": "plane_strain", "linear_solver": "cg-h1amg"}, "linear_solver"),
     ],
 )
 def test_bad_model_parameters_name_the_parameter(values, word):
