@@ -38,6 +38,7 @@ import netgen.meshing as ngm
 import numpy as np
 from ngsolve import IfPos, Mesh, Parameter, atan2, pi, sin, sqrt, x, y
 
+from ngat.elasticity import AntiPlane, Elasticity
 from ngat.geometry import glue, polygon_face
 from ngat.scene import Scene
 
@@ -398,14 +399,24 @@ def griffith_lead(tip_x: float, toughness: float, amplitude: float, h: float = 0
 
 
 def energy_release_rate(
-    points, cells, u, v, eps: float, eta: float, centre=(CRACK_LENGTH, 0.0), radii=(0.27, 0.48)
+    points,
+    cells,
+    u,
+    v,
+    eps: float,
+    eta: float,
+    centre=(CRACK_LENGTH, 0.0),
+    radii=(0.27, 0.48),
+    elasticity: Elasticity | None = None,
 ) -> float:
     """Return J, the energy release rate of a discrete AT2 solution (domain J-integral).
 
-    J = ∫ [−W ∂ₓq + 2 a uₓ ∇u·∇q + 2ε vₓ ∇v·∇q] dx over the body, with a = mean(v²) + η per
-    element (the lumped coefficient), W = a|∇u|² + (1 − v)²/(4ε) + ε|∇v|² the AT2 energy
-    density and q = 1 inside ``radii[0]``, 0 outside ``radii[1]``, linear in r between. At a
-    critical point this is path independent (Eshelby) and is the rate at which the total
+    J = ∫ [−Ψ ∂ₓq + 2 a s(u) : (∂ₓu ⊗ ∇q) + 2ε vₓ ∇v·∇q] dx over the body, with
+    a = mean(v²) + η per element (the lumped coefficient), s(u) the flux of the elastic energy
+    density W = s(u) : ∇u (:mod:`ngat.elasticity`: s = ∇u for the anti-plane W = |∇u|²,
+    s = σ/2 in plane elasticity), Ψ = a W + (1 − v)²/(4ε) + ε|∇v|² the AT2 energy density
+    (G_c = 1) and q = 1 inside ``radii[0]``, 0 outside ``radii[1]``, linear in r between. At
+    a critical point this is path independent (Eshelby) and is the rate at which the total
     energy is released per unit advance of everything inside the annulus, crack and process
     zone: Griffith's G of the discrete solution. The annulus must enclose the whole crack and
     stay in the body (the default: 0.45R to 0.8R about the slit tip).
@@ -421,52 +432,94 @@ def energy_release_rate(
     cells
         (m, 3) vertex numbers of the triangles (a discontinuous numbering is fine: the slit's
         faces then have their own vertices).
-    u, v
-        (n,) displacement and phase field at the vertices.
+    u
+        (n,) anti-plane displacement, or (n, k ≥ 2) in-plane displacement (its first two
+        columns: a VTU's vector u has three).
+    v
+        (n,) phase field at the vertices.
     eps, eta
         ε and η of the run.
     centre
         Centre of the annulus.
     radii
         Inner and outer radius of the annulus.
+    elasticity
+        The model's energy density (:func:`ngat.elasticity.elasticity`); default anti-plane.
 
     Returns
     -------
     float
         J.
     """
-    points = np.asarray(points, dtype=float)[:, :2]
+    elasticity = elasticity or AntiPlane()
+    corners, area, gradient = _triangles(points, cells)
+    columns = np.asarray(u, dtype=float).reshape(len(points), -1)[:, : elasticity.components]
+    grad_u = np.stack([gradient(column) for column in columns.T], axis=1)  # (m, k, 2)
+    flux = elasticity.flux(grad_u)
+    grad_v = gradient(v)
+    offset = corners.mean(axis=1) - np.asarray(centre)
+    r = np.hypot(offset[:, 0], offset[:, 1])
+    r1, r2 = radii
+    body = (np.abs(offset[:, 1]) < HEIGHT / 2 - FRAME) & (corners.mean(axis=1)[:, 0] > FRAME)
+    ramp = (r > r1) & (r < r2) & body & (corners.mean(axis=1)[:, 0] < LENGTH - FRAME)
+    grad_q = np.zeros_like(grad_v)
+    grad_q[ramp] = -offset[ramp] / r[ramp, None] / (r2 - r1)
+    local_v = np.asarray(v, dtype=float)[cells]
+    a = (local_v**2).mean(axis=1) + eta
+    density = (
+        a * (flux * grad_u).sum(axis=(1, 2))
+        + (1 - local_v.mean(axis=1)) ** 2 / (4 * eps)
+        + eps * (grad_v**2).sum(axis=1)
+    )
+    integrand = (
+        -density * grad_q[:, 0]
+        + 2 * a * np.einsum("mi,mij,mj->m", grad_u[:, :, 0], flux, grad_q)
+        + 2 * eps * grad_v[:, 0] * (grad_v * grad_q).sum(axis=1)
+    )
+    return float((area * integrand).sum())
+
+
+def _triangles(points, cells):
+    """Return the corners, the areas and a P1 gradient function of a triangle mesh."""
     cells = np.asarray(cells)
-    corners = points[cells]
+    corners = np.asarray(points, dtype=float)[:, :2][cells]
     edges = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], axis=1)
+    area = 0.5 * np.abs(edges[:, 0, 0] * edges[:, 1, 1] - edges[:, 0, 1] * edges[:, 1, 0])
 
     def gradient(values):
         local = np.asarray(values, dtype=float)[cells]
         rhs = np.stack([local[:, 1] - local[:, 0], local[:, 2] - local[:, 0]], axis=1)
         return np.linalg.solve(edges, rhs[:, :, None])[:, :, 0]
 
-    area = 0.5 * np.abs(edges[:, 0, 0] * edges[:, 1, 1] - edges[:, 0, 1] * edges[:, 1, 0])
-    grad_u, grad_v = gradient(u), gradient(v)
-    offset = corners.mean(axis=1) - np.asarray(centre)
-    r = np.hypot(offset[:, 0], offset[:, 1])
-    r1, r2 = radii
-    body = (np.abs(offset[:, 1]) < HEIGHT / 2 - FRAME) & (corners.mean(axis=1)[:, 0] > FRAME)
-    ramp = (r > r1) & (r < r2) & body & (corners.mean(axis=1)[:, 0] < LENGTH - FRAME)
-    grad_q = np.zeros_like(grad_u)
-    grad_q[ramp] = -offset[ramp] / r[ramp, None] / (r2 - r1)
-    local_v = np.asarray(v, dtype=float)[cells]
-    a = (local_v**2).mean(axis=1) + eta
-    density = (
-        a * (grad_u**2).sum(axis=1)
-        + (1 - local_v.mean(axis=1)) ** 2 / (4 * eps)
-        + eps * (grad_v**2).sum(axis=1)
-    )
-    integrand = (
-        -density * grad_q[:, 0]
-        + 2 * a * grad_u[:, 0] * (grad_u * grad_q).sum(axis=1)
-        + 2 * eps * grad_v[:, 0] * (grad_v * grad_q).sum(axis=1)
-    )
-    return float((area * integrand).sum())
+    return corners, area, gradient
+
+
+def band_surface_energy(points, cells, v, eps: float, x_range=(0.15, 0.3)) -> float:
+    """Return Γ, the surface energy per unit length of the crack band along the slit.
+
+    Γ = ∫ (1 − v)²/(4ε) + ε|∇v|² over the strip ``x_range`` × (−H/2 + d, H/2 − d), divided by
+    its length (G_c = 1; the lumped (1 − v)² is the element mean of the vertex values).
+
+    With a phase-field pre-crack (v = 0 on the slit, ``surfing_mode_i.make_scene(
+    precrack=True)``) the band crosses the annulus of :func:`energy_release_rate` behind the
+    tip; translating the inside of the annulus lengthens that band, so J counts its surface
+    energy against the release: Griffith's G is J + Γ. The default strip lies where the band
+    crosses the default annulus (0.27 to 0.48 behind a₀), away from the tip and the frame.
+
+    Parameters
+    ----------
+    points, cells, v, eps
+        As for :func:`energy_release_rate`.
+    x_range
+        The strip's ends.
+    """
+    corners, area, gradient = _triangles(points, cells)
+    local_v = np.asarray(v, dtype=float)[np.asarray(cells)]
+    density = ((1 - local_v) ** 2).mean(axis=1) / (4 * eps) + eps * (gradient(v) ** 2).sum(axis=1)
+    centre = corners.mean(axis=1)
+    strip = (centre[:, 0] > x_range[0]) & (centre[:, 0] < x_range[1])
+    strip &= np.abs(centre[:, 1]) < HEIGHT / 2 - FRAME
+    return float((area * density)[strip].sum() / (x_range[1] - x_range[0]))
 
 
 def griffith_toughness(release_rates, tip_x, eps: float, grown: float = 10.0, end=None) -> float:

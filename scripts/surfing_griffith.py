@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ngat.driver import run
+from ngat.elasticity import elasticity
 from ngat.geometries import surfing, surfing_mode_i
 from ngat.parameters import Parameters
 
@@ -78,22 +79,32 @@ def adaptive_scene(mode: str, **kwargs):
     return surfing_mode_i.make_scene(**{**kwargs, "name": kwargs["name"] + "-mode-i"})
 
 
-def release_rates(folder: Path, eps: float, eta: float) -> list[float]:
+def release_rates(
+    folder: Path, eps: float, eta: float, mode: str = "iii", precrack: bool = False
+) -> list[float]:
     """Return J (:func:`ngat.geometries.surfing.energy_release_rate`) at each written step.
 
-    Reads ``fields/step_*.vtu`` of a results folder (written at every step by default).
+    Reads ``fields/step_*.vtu`` of a results folder (written at every step by default); ``mode``
+    "i" takes u as the plane-strain displacement of ``surfing-mode-i``. With ``precrack`` the
+    pre-crack's band crosses the annulus and J + Γ is returned
+    (:func:`~ngat.geometries.surfing.band_surface_energy`).
     """
     import pyvista
 
+    density = (
+        elasticity("plane_strain", surfing_mode_i.YOUNG, surfing_mode_i.POISSON)
+        if mode == "i"
+        else None
+    )
     rates = []
     for path in sorted((Path(folder) / "fields").glob("step_*.vtu")):
         grid = pyvista.read(path)
         cells = np.asarray(grid.cells).reshape(-1, 4)[:, 1:]
-        rates.append(
-            surfing.energy_release_rate(
-                grid.points, cells, grid.point_data["u"], grid.point_data["v"], eps, eta
-            )
-        )
+        u, v = grid.point_data["u"], grid.point_data["v"]
+        j = surfing.energy_release_rate(grid.points, cells, u, v, eps, eta, elasticity=density)
+        if precrack:
+            j += surfing.band_surface_energy(grid.points, cells, v, eps)
+        rates.append(j)
     return rates
 
 
@@ -105,6 +116,7 @@ def critical_amplitude(
     steps: int = 25,
     mode: str = "iii",
     band_length: float = 0.15,
+    precrack: bool = False,
     **overrides,
 ) -> dict:
     """Ramp A with the tip field fixed at the pre-crack's tip; return A_c² against G_eff(h).
@@ -124,6 +136,9 @@ def critical_amplitude(
     band_length
         Length of a structured band beyond a₀, in units of R (room for 10ε of growth and
         more at R/ε ≥ 100 needs 0.35; the default keeps the A_c² checks' meshes).
+    precrack
+        Mode I: v = 0 on the slit's faces from the start (a phase-field pre-crack,
+        :func:`ngat.geometries.surfing_mode_i.on_slit`).
     overrides
         Further parameters of the run (``am_tol``, ...).
 
@@ -154,6 +169,8 @@ def critical_amplitude(
         band_end=surfing.CRACK_LENGTH + band_length * R, half_width=6 * eps,
         name="surfing-critical",
     )  # fmt: skip
+    if precrack:
+        kwargs["precrack"] = True
     scene = surfing.make_scene(**kwargs) if h else adaptive_scene(mode, **kwargs)
     parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
@@ -164,12 +181,7 @@ def critical_amplitude(
     structured = h is not None
     h = h or band_size(grown)
     g_eff = surfing.effective_toughness(h, eps)
-    # The J-integral is written for the anti-plane energy.
-    rates = (
-        release_rates(folder, eps, parameters.model.eta)
-        if mode == "iii"
-        else [np.nan] * len(records)
-    )
+    rates = release_rates(folder, eps, parameters.model.eta, mode, precrack)
     end = surfing.CRACK_LENGTH + band_length * R - 5 * eps if structured else None
     j_c = surfing.griffith_toughness(rates, [r["tip1_x"] for r in records], eps, end=end)
     return {
@@ -198,6 +210,7 @@ def steady_propagation(
     lag: float = 0.0,
     ramp: float = 0.05,
     mode: str = "iii",
+    precrack: bool = False,
     **overrides,
 ) -> dict:
     """Drive the crack with A² = 1.2 G_eff(h) at speed V; return its speed and toughness.
@@ -227,6 +240,8 @@ def steady_propagation(
         steady lead instead of overshooting it.
     mode
         "iii" (anti-plane) or "i" (plane strain; adaptive runs only, :func:`adaptive_scene`).
+    precrack
+        Mode I: a phase-field pre-crack on the slit (:func:`critical_amplitude`).
     overrides
         Further parameters of the run.
 
@@ -250,6 +265,8 @@ def steady_propagation(
         band_end=start + speed * times[-1] + 0.25 * R, half_width=6 * eps,
         name="surfing-steady",
     )  # fmt: skip
+    if precrack:
+        kwargs["precrack"] = True
     scene = surfing.make_scene(**kwargs) if h else adaptive_scene(mode, **kwargs)
     parameters, times = scene.configure(overrides=adaptive_overrides(eps, h, overrides))
     begin = time.perf_counter()
@@ -304,6 +321,10 @@ def main() -> None:
         help="anti-plane (iii) or plane-strain (i) surfing; mode i with --adaptive only",
     )  # fmt: skip
     parser.add_argument(
+        "--precrack", action="store_true",
+        help="mode i: v = 0 on the slit's faces from the start (a phase-field pre-crack)",
+    )  # fmt: skip
+    parser.add_argument(
         "--adaptive", type=float, nargs="+", default=None, metavar="R/EPS",
         help="adaptive runs (adapt=band defaults, unstructured mesh of maxh = 10 eps) instead",
     )  # fmt: skip
@@ -319,16 +340,19 @@ def main() -> None:
         h = h_over_eps * eps if h_over_eps else None
         tag = f"R{ratio:g}_h{h_over_eps:g}" if h else f"R{ratio:g}_adaptive"
         tag += "" if args.mode == "iii" else "_mode_i"
-        a = critical_amplitude(eps, h, args.out / f"critical_{tag}", mode=args.mode)
+        tag += "_precrack" if args.precrack else ""
+        options = {"mode": args.mode, "precrack": args.precrack}
+        a = critical_amplitude(eps, h, args.out / f"critical_{tag}", **options)
         b = steady_propagation(
-            eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, mode=args.mode
+            eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
         )
         rows.append(
             {"R_over_eps": ratio, "mesh": "structured" if h else "adaptive",
              "h_over_eps (a)": round(a["h"] / eps, 4), "h_over_eps (b)": round(b["h"] / eps, 4),
              "elements (a)": a["elements"], "elements (b)": b["elements"],
              "g_eff": round(a["g_eff"], 5),
-             "a_c_sq_over_g_eff": round(a["ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
+             "a_c_sq_over_g_eff": round(a["ratio"], 4),
+             "j_c_over_g_eff": round(a["j_ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
              "speed_over_V": round(b["speed_ratio"], 4),
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),
              "tip_g_drift": round(b["tip_g_drift"], 4),
