@@ -334,6 +334,10 @@ class ResultsWriter:
             probe.unlink()
             for stale in self.folder.glob(TEMPORARY):
                 stale.unlink()
+            if not append:
+                # A fresh run's steps replace an earlier run's: none of its VTUs may stay behind.
+                for stale in (self.folder / "fields").glob("step_*.vtu"):
+                    stale.unlink()
             self.reserve = self.folder / ".ngat-reserve"
             # Random bytes: a compressing file system would store zeros in no space at all.
             self.reserve.write_bytes(os.urandom(RESERVE))

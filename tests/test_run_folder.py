@@ -1,7 +1,8 @@
-"""The results folder across restarts: a fresh run.log with --overwrite, the wall time of a
-resumed run, a resume that works after summary.json was deleted, and the diagnostics of the
-interrupted part."""
+"""The results folder across restarts: a fresh run.log and fields with --overwrite, the wall
+time of a resumed run, a resume that works after summary.json was deleted, and the diagnostics
+of the interrupted part."""
 
+import dataclasses
 import json
 import textwrap
 import time
@@ -31,6 +32,20 @@ def test_overwrite_starts_a_fresh_run_log(tmp_path):
     assert main(args) == 0
     assert main([*args, "--overwrite"]) == 0
     assert (folder / "run.log").read_text().count("scene profile-1d:") == 1
+
+
+def test_a_fresh_run_leaves_no_vtu_of_an_earlier_longer_run(tmp_path):
+    # Scripts read fields/step_*.vtu: a shorter run into the same folder must not leave the
+    # longer run's last steps behind.
+    scene = dataclasses.replace(load_scene("profile-1d"), times=[0.0, 0.1, 0.2, 0.3])
+    parameters, times = scene.configure()
+    run(scene, parameters, times, tmp_path)
+    longer = {p.name for p in (tmp_path / "fields").glob("*.vtu")}
+    run(scene, parameters, times[:2], tmp_path)
+    left = {p.name for p in (tmp_path / "fields").glob("*.vtu")}
+    assert any(int(name[5:9]) >= 2 for name in longer)
+    assert left and all(int(name[5:9]) < 2 for name in left)
+    assert all(name in (tmp_path / "fields.pvd").read_text() for name in left)
 
 
 def test_resume_without_summary_counts_the_whole_wall_time(tmp_path, capsys):
