@@ -419,7 +419,10 @@ def energy_release_rate(
     a critical point this is path independent (Eshelby) and is the rate at which the total
     energy is released per unit advance of everything inside the annulus, crack and process
     zone: Griffith's G of the discrete solution. The annulus must enclose the whole crack and
-    stay in the body (the default: 0.45R to 0.8R about the slit tip).
+    stay in the body (the default: 0.45R to 0.8R about the slit tip). q is the P1 interpolant
+    of that weight (:func:`_weight`): with q evaluated at the element centres instead, the
+    elements of an unrefined 10ε mesh across the annulus bias J by +7 % (the K field of G = 1
+    with the tip resolved: J = 1.078, against 1.017 with the interpolant, mode I).
 
     Unlike A², J does not carry the bias of AT2's diffuse damage: the whole body is softened
     by v ≈ 1/(1 + 4ε|∇u|²), so the tip sees less than the imposed G = A² (J/A² ≈ 0.90 at
@@ -457,13 +460,7 @@ def energy_release_rate(
     grad_u = np.stack([gradient(column) for column in columns.T], axis=1)  # (m, k, 2)
     flux = elasticity.flux(grad_u)
     grad_v = gradient(v)
-    offset = corners.mean(axis=1) - np.asarray(centre)
-    r = np.hypot(offset[:, 0], offset[:, 1])
-    r1, r2 = radii
-    body = (np.abs(offset[:, 1]) < HEIGHT / 2 - FRAME) & (corners.mean(axis=1)[:, 0] > FRAME)
-    ramp = (r > r1) & (r < r2) & body & (corners.mean(axis=1)[:, 0] < LENGTH - FRAME)
-    grad_q = np.zeros_like(grad_v)
-    grad_q[ramp] = -offset[ramp] / r[ramp, None] / (r2 - r1)
+    grad_q = gradient(_weight(points, centre, radii))
     local_v = np.asarray(v, dtype=float)[cells]
     a = (local_v**2).mean(axis=1) + eta
     density = (
@@ -477,6 +474,20 @@ def energy_release_rate(
         + 2 * eps * grad_v[:, 0] * (grad_v * grad_q).sum(axis=1)
     )
     return float((area * integrand).sum())
+
+
+def _weight(points, centre, radii) -> np.ndarray:
+    """Return the weight q of the J-integral at the vertices.
+
+    q = 1 within ``radii[0]`` of ``centre``, 0 beyond ``radii[1]`` and on the frame, linear in
+    r between.
+    """
+    points = np.asarray(points, dtype=float)[:, :2]
+    r = np.hypot(points[:, 0] - centre[0], points[:, 1] - centre[1])
+    q = np.clip((radii[1] - r) / (radii[1] - radii[0]), 0.0, 1.0)
+    inside = (np.abs(points[:, 1]) < HEIGHT / 2 - FRAME) & (points[:, 0] > FRAME)
+    q[~(inside & (points[:, 0] < LENGTH - FRAME))] = 0.0
+    return q
 
 
 def _triangles(points, cells):

@@ -133,6 +133,25 @@ def test_adaptive_crack_grows_at_the_energy_release_rate_g_eff(tmp_path):
     assert tips[-1] - tips[0] > 15 * eps, "the crack should grow"  # measured 23ε
 
 
+def test_mode_i_crack_grows_from_a_phase_field_precrack_at_g_eff(tmp_path):
+    # Mode I (plane strain, Williams' K_I field of G = A²), adaptive from an unstructured 10ε
+    # mesh, R/ε = 25, v = 0 on the slit's faces from the start. From the bare slit the crack
+    # forms only at A² ≈ 1.2–1.3 G_eff (its tip stays diffuse); from the pre-crack it grows
+    # while J + Γ (the pre-crack band's surface energy added back) equals G_eff of the band
+    # it runs in. Measured: J = 0.986 before growth, then 1.03–1.05 (J_c = 1.020 G_eff,
+    # h = 0.09ε, 59k elements, 8ε of growth; the strip of R = 25ε stops it there).
+    script = griffith_script()
+    eps = script.R / 25
+    result = script.critical_amplitude(
+        eps, None, tmp_path / "critical", span=(0.9, 2.2), steps=10, mode="i", precrack=True
+    )
+    assert 0 < result["h"] <= eps / 4
+    tips = [r["tip1_x"] for r in result["records"]]
+    assert tips[-1] - tips[0] > 6 * eps, "the crack should grow"
+    j_c = surfing.griffith_toughness(result["release_rates"], tips, eps, grown=5.0)
+    assert abs(j_c / result["g_eff"] - 1) < 0.03, j_c / result["g_eff"]
+
+
 def test_discrete_release_rate_of_the_tip_field_is_a_squared():
     # v ≡ 1 and u the discrete solution under U on the frame, crack tip at the field's: the
     # domain J-integral of the discrete energy is Griffith's G = A² (U solves the problem;
