@@ -138,7 +138,7 @@ def test_mode_i_crack_grows_from_a_phase_field_precrack_at_g_eff(tmp_path):
     # mesh, R/ε = 25, v = 0 on the slit's faces from the start. From the bare slit the crack
     # forms only at A² ≈ 1.2–1.3 G_eff (its tip stays diffuse); from the pre-crack it grows
     # while J + Γ (the pre-crack band's surface energy added back) equals G_eff of the band
-    # it runs in. Measured: J = 0.986 before growth, then 1.03–1.05 (J_c = 1.020 G_eff,
+    # it runs in. Measured: J = 0.985 before growth, then 1.03–1.05 (J_c = 1.025 G_eff,
     # h = 0.09ε, 59k elements, 8ε of growth; the strip of R = 25ε stops it there).
     script = griffith_script()
     eps = script.R / 25
