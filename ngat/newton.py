@@ -1,19 +1,11 @@
 """Newton's method on the coupled (u, v) system of one load step, with an energy line search.
 
 I_j(u, v) of eq. (7) is a polynomial in the nodal values; its gradient and Hessian are exact
-and, unlike alternating minimisation, Newton sees the coupling block ∂²I_j/∂u∂v. With
-c_T = mean_T(v²) + η, the lumped mass m and K_T the element matrix of the model's a_j
-(:mod:`ngat.elasticity`; ∇φ_a·∇φ_b|T| for the anti-plane model):
+(:class:`ngat.functional.LumpedFunctional`, which also states I_j as an NGSolve energy, the
+definition the tests check them against) and, unlike alternating minimisation, Newton sees the
+coupling block ∂²I_j/∂u∂v. This module scatters the Hessian's element blocks into one sparse
+matrix per mesh and solves with it.
 
-- ∂I/∂u = 2 Σ_T c_T K_T u,  ∂I/∂v = 2 G_c (B(u) v − α m)  (B: the matrix of b_j, Definition 2,
-  with W(u)/G_c in place of |∇u|²; for AT1 the q, f, d of :mod:`ngat.crack_density` in
-  place of α, α, ε);
-- ∂²I/∂u² = 2 Σ_T c_T K_T,  ∂²I/∂v² = 2 G_c B(u),
-  ∂²I/∂v_a∂u_b = (4/3) v_a (K_T u)_b on each element T ∋ a, b (for the anti-plane model
-  (4/3) |T| v_a ∇u_T·∇φ_b).
-
-:func:`energy_form` states the same functional as an NGSolve ``Variation`` with the vertex
-rule (the definition; a test checks the vectorised gradient and Hessian against NGSolve's).
 A Newton step solves H δ = −∇I_j with u fixed on Ω_D and v fixed on CR(t_k) and on the bounds
 where the gradient pushes v out of [0, 1] (a projected Newton method), then backtracks along
 P(w + s δ), s = 1, ½, ¼, … until I_j decreases by the Armijo condition. Away from a minimiser
@@ -32,40 +24,17 @@ from __future__ import annotations
 
 import logging
 
-import ngsolve
 import numpy as np
-from ngsolve import BilinearForm, Variation
 from ngsolve.la import SparseMatrixd
 from scipy.linalg import eigh_tridiagonal
 
-from ngat.elasticity import AntiPlane, Elasticity
-from ngat.forms import lumped_dx, unique_keys
-from ngat.parameters import ModelParameters, ParameterError
-from ngat.state import ATState, lumped_energies
+from ngat.forms import unique_keys
+from ngat.parameters import ParameterError
+from ngat.state import ATState
 
-__all__ = ["NewtonSolver", "energy_form"]
+__all__ = ["NewtonSolver"]
 
 log = logging.getLogger(__name__)
-
-
-def energy_form(
-    space: ngsolve.FESpace, model: ModelParameters, elasticity: Elasticity | None = None
-) -> BilinearForm:
-    """Return I_j(u, v) (eq. 7) as an NGSolve energy on the product space of u and v.
-
-    ``form.Energy``, ``form.Apply`` and ``form.AssembleLinearization`` then give I_j, its
-    gradient and its Hessian. ``elasticity`` is the model's energy density (default the
-    anti-plane |∇u|²); the space is then its space of u times P1.
-    """
-    u, v = space.TrialFunction()
-    elasticity = elasticity or AntiPlane()
-    energy = (v * v + model.eta) * elasticity.degraded_form(u) + model.gc * model.surface.density(v)
-    intact = elasticity.intact_form(u)
-    if intact is not None:
-        energy += intact
-    form = BilinearForm(space)
-    form += Variation(energy * lumped_dx())
-    return form
 
 
 class NewtonSolver:
@@ -166,52 +135,10 @@ class NewtonSolver:
         self.delta = self.matrix.CreateColVector()
         self._arrays = arrays
 
-    def gradient(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Return ∇I_j at (u, v), stacked (∂I/∂u, ∂I/∂v)."""
-        state = self.state
-        arrays, model, density = state.arrays, state.model, state.elasticity
-        el, area = arrays.elements, arrays.area
-        (flux, intact), grad_v = density.fluxes(density.gradient(arrays, u)), arrays.gradient(v)
-        c = arrays.vertex_mean(v * v) + model.eta
-        # (K_T u)_(i,a) = |T| s_i·∇φ_a: a_j(v; u, φ_a e_i) on T (s = c s⁺ + s⁻ with a split).
-        flux_u = np.einsum("eak,eik->eia", arrays.grad_phi, flux) * (area * c)[:, None, None]
-        if intact is not None:
-            flux_u += np.einsum("eak,eik->eia", arrays.grad_phi, intact) * area[:, None, None]
-        flux_v = np.einsum("eak,ek->ea", arrays.grad_phi, grad_v) * area[:, None]
-        g_u = 2 * np.bincount(
-            density.element_dofs(arrays).ravel(), weights=flux_u.ravel(), minlength=len(u)
-        )
-        energy = density.degraded_density(arrays, u)
-        strain = np.bincount(
-            el.ravel(), weights=np.repeat(area * energy / 3, 3), minlength=arrays.nv
-        )
-        surface = model.surface
-        # 2 G_c m (q v − f) written as −2 G_c m (q (1 − v) + f − q): for AT2 (f = q) the
-        # rounding of the paper's −2 G_c α m (1 − v), so anti-plane runs repeat bit for bit.
-        g_v = 2 * (
-            strain * v - model.gc * surface.reaction * arrays.mass * (1 - v)
-            - model.gc * (surface.source - surface.reaction) * arrays.mass
-            + model.gc * surface.diffusion
-            * np.bincount(el.ravel(), weights=flux_v.ravel(), minlength=arrays.nv)
-        )  # fmt: skip
-        return np.concatenate([g_u, g_v])
-
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
         state = self.state
-        arrays, model, density = state.arrays, state.model, state.elasticity
-        el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
-        flux = density.fluxes(density.gradient(arrays, u))[0]
-        c = arrays.vertex_mean(v * v) + model.eta
-        weights = density.weights(arrays, u, c)
-        parts = state.stiffness_parts
-        uu = sum(2 * w[:, None, None] * part for w, part in zip(weights, parts, strict=True))
-        surface = model.surface
-        mass_term = area * (density.degraded_density(arrays, u) + model.gc * surface.reaction) / 3
-        vv = 2 * model.gc * surface.diffusion * stiffness
-        vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
-        u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
-        vu = (4 / 3) * area[:, None, None] * v[el][:, :, None] * u_flux[:, None, :]
+        uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, state.stiffness_parts)
         local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
         return np.bincount(self.position, weights=local, minlength=self.nnz)
 
@@ -231,7 +158,7 @@ class NewtonSolver:
         u, v = state.u_values.copy(), state.v_values.copy()
         upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
         with state.timer("assembly"):
-            gradient = self.gradient(u, v)
+            gradient = state.functional.gradient(state.arrays, u, v)
             g_v = gradient[len(u) :]
             held = np.concatenate(
                 [state.dirichlet, crack | ((v <= 0) & (g_v > 0)) | ((v >= upper) & (g_v < 0))]
@@ -368,15 +295,14 @@ class NewtonSolver:
         """
         state = self.state
         n = len(u)
-        start = lumped_energies(state.arrays, state.model, u, v, density=state.elasticity)["total"]
+        functional, arrays = state.functional, state.arrays
+        start = functional.energies(arrays, u, v)["total"]
         scale = 1.0
         for _ in range(self.max_halvings + 1):
             u_trial = u + scale * direction[:n]
             v_trial = np.clip(v + scale * direction[n:], 0.0, upper)
             v_trial[crack] = 0.0
-            energy = lumped_energies(
-                state.arrays, state.model, u_trial, v_trial, density=state.elasticity
-            )["total"]
+            energy = functional.energies(arrays, u_trial, v_trial)["total"]
             model = scale * slope + 0.5 * scale**2 * curvature
             if energy <= min(start + self.armijo * model, ceiling):
                 state.u_values[:] = u_trial

@@ -19,13 +19,14 @@ import ngsolve
 import numpy as np
 from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule, Parameter
 
-from ngat.elasticity import Elasticity, elasticity
+from ngat.elasticity import elasticity
 from ngat.estimators import EdgeTopology
 from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
+from ngat.functional import LumpedFunctional
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
 
-__all__ = ["ATState", "SceneError", "lumped_energies"]
+__all__ = ["ATState", "SceneError"]
 
 log = logging.getLogger(__name__)
 
@@ -34,49 +35,6 @@ Load = Callable[[Parameter], ngsolve.CoefficientFunction]
 
 class SceneError(ValueError):
     """The scene or its mesh cannot define a valid problem (e.g. no Dirichlet region)."""
-
-
-def lumped_energies(
-    arrays: MeshArrays,
-    model: ModelParameters,
-    u: np.ndarray,
-    v: np.ndarray,
-    square_mean: Callable[[np.ndarray], np.ndarray] | None = None,
-    density: Elasticity | None = None,
-) -> dict[str, float]:
-    """Return bulk, surface and total energy of the lumped functional I_j (paper, eq. 7).
-
-    bulk = ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) (W⁺ = W, W⁻ = 0 without an energy split) and
-    surface = G_c ∫ α P_j((1 − v)²) + ε |∇v|², with the energy density W of the model
-    (:mod:`ngat.elasticity`) and the crack density of :mod:`ngat.crack_density` (AT2: the
-    paper's; AT1: 3/(8ε) (1 − v) + (3ε/8) |∇v|²).
-
-    Parameters
-    ----------
-    arrays
-        Element geometry of the mesh.
-    model
-        ε, η, G_c and the crack density.
-    u, v
-        DOF values of the two P1 fields.
-    square_mean
-        Per-element ∫_T f² / |T| of a P1 function f; the default is the vertex rule (eq. 7),
-        :meth:`ngat.forms.LumpedAssembler.square_mean` without lumping gives the exact value.
-    density
-        The model's energy density; default that of ``model``.
-    """
-    if square_mean is None:
-
-        def square_mean(f):
-            return arrays.vertex_mean(f * f)
-
-    density = density or elasticity(model.model, model.young, model.poisson, model.split)
-    bulk = np.sum(arrays.area * (square_mean(v) + model.eta) * density.degraded_density(arrays, u))
-    intact = density.intact_density(arrays, u)
-    if intact is not None:
-        bulk += np.dot(arrays.area, intact)
-    surface = model.gc * model.surface.energy(arrays, v, square_mean)
-    return {"bulk": float(bulk), "surface": float(surface), "total": float(bulk + surface)}
 
 
 class ATState:
@@ -122,6 +80,7 @@ class ATState:
         self.t = Parameter(0.0)
         self.crack = crack
         self.elasticity = elasticity(model.model, model.young, model.poisson, model.split)
+        self.functional = LumpedFunctional(model, self.elasticity)
         self.loads, self.load_components = {}, {}
         for name, g in loads.items():
             self.load_components[name], self.loads[name] = self._load(name, g(self.t))
@@ -353,19 +312,14 @@ class ATState:
 
         With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
         """
-        return lumped_energies(
-            self.arrays, self.model, self.u_values, self.v_values, self.assembler.square_mean,
-            self.elasticity,
-        )  # fmt: skip
+        return self.functional.energies(
+            self.arrays, self.u_values, self.v_values, self.assembler.square_mean
+        )
 
     def bulk_energy(self, u: np.ndarray) -> float:
         """Return ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) at the current v for the DOF values ``u``."""
-        arrays, density = self.arrays, self.elasticity
         c = self.assembler.square_mean(self.v_values) + self.model.eta
-        return float(
-            np.dot(arrays.area, c * density.degraded_density(arrays, u))
-            + np.dot(arrays.area, density.intact_density(arrays, u))
-        )
+        return self.functional.bulk(self.arrays, u, c)
 
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.
