@@ -4,10 +4,12 @@ I_j(u, v) = ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) + G_c γ_j(v), with the elasti
 the model (:mod:`ngat.elasticity`; W⁺ = W and W⁻ = 0 without an energy split) and the crack
 density γ of :mod:`ngat.crack_density` (AT2: the paper's α P_j((1 − v)²) + ε |∇v|²).
 :class:`LumpedFunctional` is the one place where I_j is written out as numbers: the energies of
-the records, the bulk energy of the split u-step's line search, and the gradient and Hessian of
-Newton's method (:mod:`ngat.newton`). :meth:`LumpedFunctional.energy_form` states the same
-functional as an NGSolve ``Variation`` with the vertex rule: the definition, against which the
-tests check the vectorised gradient and Hessian (1e−12).
+the records, the bulk energy of the split u-step's line search, the coefficients of the two
+half-steps' quadratic forms a_j and b_j (which :class:`ngat.state.ATState` writes into its
+matrices), and the gradient and Hessian of Newton's method (:mod:`ngat.newton`).
+:meth:`LumpedFunctional.energy_form` states the same functional as an NGSolve ``Variation`` with
+the vertex rule: the definition, against which the tests check the vectorised gradient and
+Hessian (1e−12).
 
 With c_T = mean_T(v²) + η, the lumped mass m and K_T the element matrix of the model's a_j
 (∇φ_a·∇φ_b |T| for the anti-plane model):
@@ -57,6 +59,18 @@ class LumpedFunctional:
         if intact is not None:
             bulk += np.dot(arrays.area, intact)
         return float(bulk)
+
+    def u_step_weights(self, arrays: MeshArrays, u: np.ndarray, c: np.ndarray) -> list[np.ndarray]:
+        """Return the element weights of a_j's parts, the u-step's quadratic form (half of ∂²I/∂u²).
+
+        ``c`` = P_j(v²) + η per element; with an energy split the weights of its parts follow
+        the sign of tr ε(u) on each element (:meth:`ngat.elasticity.Elasticity.weights`).
+        """
+        return self.density.weights(arrays, u, c)
+
+    def v_step_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return W⁺(u)/G_c per element: b_j's reaction coefficient (half of ∂²I/∂v² / G_c)."""
+        return self.density.degraded_density(arrays, u) / self.model.gc
 
     def energies(
         self,
@@ -134,7 +148,7 @@ class LumpedFunctional:
         el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
         flux = density.fluxes(density.gradient(arrays, u))[0]
         c = arrays.vertex_mean(v * v) + model.eta
-        weights = density.weights(arrays, u, c)
+        weights = self.u_step_weights(arrays, u, c)
         uu = sum(2 * w[:, None, None] * part for w, part in zip(weights, parts, strict=True))
         surface = model.surface
         mass_term = area * (density.degraded_density(arrays, u) + model.gc * surface.reaction) / 3

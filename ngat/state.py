@@ -289,7 +289,7 @@ class ATState:
         weights of its parts follow the sign of tr ε(u) on T (:mod:`ngat.elasticity`).
         """
         c = self.assembler.square_mean(self.v_values) + self.model.eta
-        weights = self.elasticity.weights(self.arrays, self.u_values, c)
+        weights = self.functional.u_step_weights(self.arrays, self.u_values, c)
         return self.assembler.weighted_values(weights, self.stiffness_parts)
 
     def assemble_a(self) -> None:
@@ -302,7 +302,7 @@ class ATState:
         b_j of Definition 2 with W⁺(u)/G_c in place of |∇u|² and the model's crack density
         (:mod:`ngat.crack_density`).
         """
-        density = self.elasticity.degraded_density(self.arrays, self.u_values) / self.model.gc
+        density = self.functional.v_step_density(self.arrays, self.u_values)
         values = self.b_assembler.b_values(density, self.model.surface)
         self.b_matrix.AsVector().FV().NumPy()[:] = values
 
