@@ -25,10 +25,9 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from ngsolve.la import SparseMatrixd
+from ngsolve import BilinearForm, dx
 from scipy.linalg import eigh_tridiagonal
 
-from ngat.forms import unique_keys
 from ngat.parameters import ParameterError
 from ngat.state import ATState
 
@@ -96,39 +95,58 @@ class NewtonSolver:
     def _setup(self) -> None:
         """Build the block graph, the scatter positions and the work vectors for this mesh.
 
-        The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model) and
-        of v (shifted behind u's): four blocks uu, vv, vu, uv. Its graph is the union of the
-        element couplings; every local entry's position follows by a sorted search.
+        The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model: c
+        components, component-major) and of v (behind u's): every one of its (c + 1)² blocks
+        has the graph G of the P1 space, whose positions of the element couplings the state's
+        assembler of b_j already holds. NGSolve builds the block graph itself, by one assembly
+        of a form on the product space (its CSR rows sorted, so row (I, a) starts at
+        I (c + 1) nnz(G) + (c + 1) rowptr_G[a] and holds the columns of component J at
+        J deg(a) + the position in row a of G); each local entry's position follows by that
+        arithmetic, without a search.
         """
         state = self.state
         arrays = state.arrays
-        nu, n = len(state.u_values), arrays.nv
-        size = nu + n
-        el_u = state.elasticity.element_dofs(arrays)
-        el_v = arrays.elements + nu
-
-        def keys(rows, cols):
-            return (rows[:, :, None] * size + cols[:, None, :]).ravel()
-
-        vu_rows = np.broadcast_to(el_v[:, :, None], (arrays.ne, 3, el_u.shape[1]))
-        vu_cols = np.broadcast_to(el_u[:, None, :], vu_rows.shape)
-        # The order of hessian_values: uu, vv, vu (row v_a, column u_b), uv (its transpose,
-        # listed in vu's order).
-        local = np.concatenate(
-            [
-                keys(el_u, el_u),
-                keys(el_v, el_v),
-                (vu_rows * size + vu_cols).ravel(),
-                (vu_cols * size + vu_rows).ravel(),
-            ]
-        )
-        graph, self.position = unique_keys(local)
-        self.nnz = len(graph)
-        self.entry_rows, self.entry_cols = graph // size, graph % size
-        self.matrix = SparseMatrixd.CreateFromCOO(
-            self.entry_rows, self.entry_cols, np.ones(self.nnz), size, size
-        )
-        self.diagonal = np.searchsorted(graph, np.arange(size) * (size + 1))
+        c = state.elasticity.components
+        space = state.fes_u * state.fes
+        (u, v), (u_test, v_test) = space.TnT()
+        trial = sum((u[i] for i in range(c)), v) if c > 1 else u + v
+        test = sum((u_test[i] for i in range(c)), v_test) if c > 1 else u_test + v_test
+        form = BilinearForm(space, symmetric=False)
+        form += trial * test * dx
+        self.matrix = form.Assemble().mat
+        _, cols, rowptr = self.matrix.CSR()
+        cols, rowptr = np.asarray(cols, dtype=np.int64), np.asarray(rowptr, dtype=np.int64)
+        self.nnz = len(cols)
+        self.entry_rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
+        self.entry_cols = cols
+        # Positions in G (the P1 graph of b_j) of each element's vertex pairs, and G's rows.
+        graph = state.b_assembler
+        in_g = graph.position.reshape(arrays.ne, 3, 3)
+        _, _, rowptr_g = state.b_matrix.CSR()
+        rowptr_g = np.asarray(rowptr_g, dtype=np.int64)
+        degree, block = np.diff(rowptr_g), (c + 1) * graph.nnz
+        el = arrays.elements
+        # Row (I, a), column (J, b): I·block + c·rowptr_G[a] + J·deg(a) + position of (a, b).
+        row_start = c * rowptr_g[el]  # (ne, 3)
+        components = np.arange(c + 1)
+        start = components[:, None, None] * block + row_start[None]  # (c + 1, ne, 3)
+        shift = components[:, None, None] * degree[el][None]  # (c + 1, ne, 3): J·deg(a)
+        # position[I, J][e, i, j] for the rows (I, el[e, i]) and columns (J, el[e, j]).
+        position = (
+            start[:, None, :, :, None] + shift[None, :, :, :, None] + in_g[None, None]
+        )  # (I, J, ne, 3, 3)
+        uu = position[:c, :c].transpose(2, 0, 3, 1, 4).reshape(arrays.ne, 3 * c, 3 * c)
+        vv = position[c, c]
+        vu = position[c, :c].transpose(1, 2, 0, 3).reshape(arrays.ne, 3, 3 * c)
+        # uv listed in vu's order: the entry (u_(J, b), v_a) for each (v_a, u_(J, b)).
+        uv = position[:c, c].transpose(1, 3, 0, 2).reshape(arrays.ne, 3, 3 * c)
+        self.position = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), uv.ravel()])
+        self.diagonal = (
+            components[:, None] * block
+            + c * rowptr_g[None, :-1]
+            + components[:, None] * degree[None]
+            + graph.diagonal[None]
+        ).ravel()
         self.inverse = None
         self.certified = 0.0
         self.rhs = self.matrix.CreateColVector()
