@@ -68,16 +68,16 @@ class CrackDensity:
         q, f = self.reaction, self.source
         return q * (1 - v) * (1 - v) + 2 * (f - q) * (1 - v) + self.diffusion * grad(v) * grad(v)
 
-    def energy(self, arrays: MeshArrays, v: np.ndarray, square_mean) -> float:
+    def energy(self, arrays: MeshArrays, v: np.ndarray, lumped: bool = True) -> float:
         """Return ∫ γ for the P1 function v: the surface energy divided by G_c.
 
-        ``square_mean`` gives ∫_T P_j(w²)/|T| per element (or the exact mean without
-        lumping, :meth:`ngat.forms.LumpedAssembler.square_mean`); P_j(1 − v) integrates exactly.
+        P_j((1 − v)²) by the vertex rule, or exactly with ``lumped=False``
+        (:meth:`ngat.forms.MeshArrays.square_mean`); P_j(1 − v) integrates exactly.
         """
         q, f = self.reaction, self.source
         grad_v = arrays.gradient(v)
         return float(
-            q * np.dot(arrays.area, square_mean(1 - v))
+            q * np.dot(arrays.area, arrays.square_mean(1 - v, lumped))
             + 2 * (f - q) * np.dot(arrays.mass, 1 - v)
             + self.diffusion * np.sum(arrays.area * (grad_v**2).sum(1))
         )

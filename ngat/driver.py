@@ -227,7 +227,8 @@ def _run_locked(
                 diagnostics.report("nan", str(error), k, float(t), raise_now=False)
                 raise
             crack = state.crack_set()
-            record = {"step": k, "t": float(t), **state.energies(), **state.reaction_forces()}
+            forces = half_steps.operators.reaction_forces()
+            record = {"step": k, "t": float(t), **state.energies(), **forces}
             record.update(
                 am_iterations=step.iterations,
                 converged=step.converged,

@@ -232,6 +232,16 @@ class MeshArrays:
         """Return the mean of nodal values over each element's vertices: ∫_T P_j f / |T|."""
         return values[self.elements].mean(axis=1)
 
+    def square_mean(self, values: np.ndarray, lumped: bool = True) -> np.ndarray:
+        """Return ∫_T P_j(w²) / |T| per element for a P1 function w, or ∫_T w² / |T| unlumped.
+
+        Exactly: ∫_T w² = |T|/12 (Σ w_a² + (Σ w_a)²) over the vertex values w_a.
+        """
+        if lumped:
+            return self.vertex_mean(values * values)
+        local = values[self.elements]
+        return ((local * local).sum(axis=1) + local.sum(axis=1) ** 2) / 12
+
 
 class LumpedAssembler:
     """Write the values of a_j and b_j into matrices with a fixed graph, without NGSolve assembly.
@@ -291,22 +301,13 @@ class LumpedAssembler:
             values += self._scatter(weight, local)
         return values
 
-    def square_mean(self, values: np.ndarray) -> np.ndarray:
-        """Return ∫_T P_j(w²) / |T| per element for a P1 function w, or ∫_T w² / |T| unlumped.
-
-        Exactly: ∫_T w² = |T|/12 (Σ w_a² + (Σ w_a)²) over the vertex values w_a.
-        """
-        if self.lumped:
-            return self.arrays.vertex_mean(values * values)
-        local = values[self.arrays.elements]
-        return ((local * local).sum(axis=1) + local.sum(axis=1) ** 2) / 12
-
     def a_values(self, v: np.ndarray, eta: float) -> np.ndarray:
         """Return the values of a_j(v; ·, ·): element coefficient mean(v²) + η times stiffness.
 
-        The mean of v² over T is :meth:`square_mean` (lumped or exact): ∇u·∇φ is constant on T.
+        The mean of v² over T is :meth:`MeshArrays.square_mean` (lumped or exact): ∇u·∇φ is
+        constant on T.
         """
-        return self._scatter(self.square_mean(v) + eta)
+        return self._scatter(self.arrays.square_mean(v, self.lumped) + eta)
 
     def b_values(self, grad_u_sq: np.ndarray, surface: CrackDensity) -> np.ndarray:
         """Return the values of b_j(u; ·, ·): ε·stiffness plus mass weighted with |∇u|² + α.

@@ -22,8 +22,6 @@ With c_T = mean_T(v²) + η, the lumped mass m and K_T the element matrix of the
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import ngsolve
 import numpy as np
 from ngsolve import BilinearForm, Variation
@@ -72,14 +70,14 @@ class LumpedFunctional:
         """Return W⁺(u)/G_c per element: b_j's reaction coefficient (half of ∂²I/∂v² / G_c)."""
         return self.density.degraded_density(arrays, u) / self.model.gc
 
-    def energies(
-        self,
-        arrays: MeshArrays,
-        u: np.ndarray,
-        v: np.ndarray,
-        square_mean: Callable[[np.ndarray], np.ndarray] | None = None,
-    ) -> dict[str, float]:
-        """Return bulk, surface and total energy of I_j.
+    def coefficient(self, arrays: MeshArrays, v: np.ndarray) -> np.ndarray:
+        """Return c_T = ∫_T P_j(v²)/|T| + η per element (exact mean of v² with lumping off)."""
+        return arrays.square_mean(v, self.model.lumping) + self.model.eta
+
+    def energies(self, arrays: MeshArrays, u: np.ndarray, v: np.ndarray) -> dict[str, float]:
+        """Return bulk, surface and total energy of I_j (eq. 7).
+
+        With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
 
         Parameters
         ----------
@@ -87,18 +85,10 @@ class LumpedFunctional:
             Element geometry of the mesh.
         u, v
             DOF values of the two P1 fields.
-        square_mean
-            Per-element ∫_T f² / |T| of a P1 function f; the default is the vertex rule (eq. 7),
-            :meth:`ngat.forms.LumpedAssembler.square_mean` without lumping gives the exact value.
         """
-        if square_mean is None:
-
-            def square_mean(f):
-                return arrays.vertex_mean(f * f)
-
         model = self.model
-        bulk = self.bulk(arrays, u, square_mean(v) + model.eta)
-        surface = model.gc * model.surface.energy(arrays, v, square_mean)
+        bulk = self.bulk(arrays, u, self.coefficient(arrays, v))
+        surface = model.gc * model.surface.energy(arrays, v, model.lumping)
         return {"bulk": bulk, "surface": float(surface), "total": float(bulk + surface)}
 
     def gradient(self, arrays: MeshArrays, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -1,14 +1,14 @@
 """The two half-steps of Algorithm 1 on an :class:`ngat.state.ATState`, with their linear solvers.
 
 The u-step minimises I_j(·, v) over g(t_k) + X_{j,D}, the v-step I_j(u, ·) over X_{j,CR} with
-0 ≤ v ≤ 1 (paper, Algorithm 1, steps 2.1 and 2.2). :class:`HalfStepSolvers` has the state write
-the matrices of a_j and b_j in place (:meth:`ngat.state.ATState.assemble_a`,
-:meth:`~ngat.state.ATState.assemble_b`) and solves with :mod:`ngat.linear`: per mesh, a sparse
+0 ≤ v ≤ 1 (paper, Algorithm 1, steps 2.1 and 2.2). :class:`HalfStepSolvers` keeps the matrices
+of a_j and b_j of the state's current mesh (:class:`ngat.operators.LumpedOperators`, rewritten in
+place at every half-step) and solves with :mod:`ngat.linear`: per mesh, a sparse
 Cholesky factorisation refreshed with ``Inverse.Update()``, which keeps the symbolic analysis,
 or, with ``linear_solver="cg-h1amg"``, CG with a rebuilt h1amg preconditioner (one per
 component of a vector u, :meth:`HalfStepSolvers._amg_forms`). It owns what
 outlives a solve — the factorisations, which a checkpoint keeps (:meth:`solver_state`) — and
-counts the solves (:class:`LinearStatistics`); the state holds the fields and operators only.
+counts the solves (:class:`LinearStatistics`); the state holds the mesh and the fields only.
 
 A module of its own rather than a part of :mod:`ngat.linear`: that module solves a linear
 system whatever it comes from, this one knows the half-steps' minimisation problems — the
@@ -27,6 +27,7 @@ from ngsolve import H1, BilinearForm
 
 from ngat.forms import a_form, b_form
 from ngat.linear import AMGConjugateGradient, LaggedCholesky
+from ngat.operators import LumpedOperators
 from ngat.parameters import SolverParameters
 from ngat.state import ATState
 
@@ -57,13 +58,13 @@ class LinearStatistics:
 class HalfStepSolvers:
     """The u-step and the v-step of an :class:`~ngat.state.ATState` with their linear solvers.
 
-    Per mesh of the state, the solvers and work vectors are made on first use; a refinement
-    (a new ``state.arrays``) drops them.
+    Per mesh of the state, the operators, solvers and work vectors are made on first use; a
+    refinement (a new ``state.arrays``) drops them.
 
     Parameters
     ----------
     state
-        Fields and operators.
+        Mesh and fields.
     max_cg
         CG iterations accepted with a stale Cholesky factor before it is refreshed
         (:class:`ngat.linear.LaggedCholesky`); 0 refactorises at every solve.
@@ -109,18 +110,25 @@ class HalfStepSolvers:
         """DOFs held at a bound of v by the last v-step on the current mesh (0 before one)."""
         return self._bound_active if self._arrays is self.state.arrays else 0
 
+    @property
+    def operators(self) -> LumpedOperators:
+        """The matrices of a_j and b_j on the state's current mesh."""
+        self._on_mesh()
+        return self._operators
+
     def _on_mesh(self) -> None:
-        """Drop the solvers and work vectors of an earlier mesh of the state."""
+        """Replace the operators, solvers and work vectors of an earlier mesh of the state."""
         state = self.state
         if self._arrays is state.arrays:
             return
         self._arrays = state.arrays
+        self._operators = operators = LumpedOperators(state)
         self._a_solver: LaggedCholesky | AMGConjugateGradient | None = None
         self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
-        self._residual = state.a_matrix.CreateColVector()
-        self._correction = state.a_matrix.CreateColVector()
-        self._v_residual = state.b_matrix.CreateColVector()
-        self._v_step = state.b_matrix.CreateColVector()
+        self._residual = operators.a_matrix.CreateColVector()
+        self._correction = operators.a_matrix.CreateColVector()
+        self._v_residual = operators.b_matrix.CreateColVector()
+        self._v_step = operators.b_matrix.CreateColVector()
         self._bound_active = 0
 
     # -- u-step -----------------------------------------------------------------------------
@@ -133,16 +141,15 @@ class HalfStepSolvers:
         tension pattern, halve the step while the energy would rise, and stop when the pattern
         no longer changes (the minimiser of that quadratic piece is then the minimiser).
         """
-        state = self.state
-        self._on_mesh()
+        state, operators = self.state, self.operators
         u = state.u_values
         for _ in range(max_iterations):
             tension = state.elasticity.tension(state.arrays, u)
             with state.timer("assembly"):
-                state.assemble_a()
+                operators.assemble_a()
             with state.timer("solve"):
                 self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
-                self._residual.data = -1 * (state.a_matrix * state.u.vec)
+                self._residual.data = -1 * (operators.a_matrix * state.u.vec)
                 self._solve(self._a_solver)
             if tension is None:
                 state.u.vec.data += self._correction
@@ -162,8 +169,10 @@ class HalfStepSolvers:
             # the energy and is the minimiser, no energy evaluation needed.
             u[:] = trial
             return True
-        start, scale = state.bulk_energy(u), 1.0
-        while state.bulk_energy(trial) > start and scale > 2.0**-29:
+        functional, arrays = state.functional, state.arrays
+        c = functional.coefficient(arrays, state.v_values)
+        start, scale = functional.bulk(arrays, u, c), 1.0
+        while functional.bulk(arrays, trial, c) > start and scale > 2.0**-29:
             scale /= 2
             trial = u + scale * step
         u[:] = trial
@@ -187,10 +196,9 @@ class HalfStepSolvers:
         crack
             Boolean DOF mask of CR(t_k), where v is fixed to 0.
         """
-        state = self.state
-        self._on_mesh()
+        state, operators = self.state, self.operators
         with state.timer("assembly"):
-            state.assemble_b()
+            operators.assemble_b()
             state.v_values[crack] = 0.0
         with state.timer("solve"):
             free = ~crack
@@ -206,7 +214,7 @@ class HalfStepSolvers:
         """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2)."""
         state = self.state
         self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
-        self._v_residual.data -= state.b_matrix * state.v.vec
+        self._v_residual.data -= self._operators.b_matrix * state.v.vec
         self._solve(solver, "v")
         state.v.vec.data += self._v_step
 
@@ -227,9 +235,9 @@ class HalfStepSolvers:
                 self._b_solver = self._refreshed(self._b_solver, "v", inactive)
                 self._v_correction(self._b_solver)
             else:
-                self._v_correction(LaggedCholesky(state.b_matrix, inactive, 0))
+                self._v_correction(LaggedCholesky(self._operators.b_matrix, inactive, 0))
             self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
-            self._v_residual.data -= state.b_matrix * state.v.vec
+            self._v_residual.data -= self._operators.b_matrix * state.v.vec
             gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
             new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
             new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
@@ -249,8 +257,8 @@ class HalfStepSolvers:
         Call after rewriting the matrix values. A Cholesky factorisation is kept while the free
         DOFs stay the same; the CG solver keeps its form and preconditioner per mesh.
         """
-        state = self.state
-        matrix = state.a_matrix if stage == "u" else state.b_matrix
+        operators = self._operators
+        matrix = operators.a_matrix if stage == "u" else operators.b_matrix
         if self.linear_solver == "cg-h1amg":
             if solver is None:
                 return AMGConjugateGradient(self._amg_forms(stage), matrix, free)
@@ -314,11 +322,10 @@ class HalfStepSolvers:
         The next solve rewrites the matrix values and so starts from a stale factorisation, as
         it would have in the uninterrupted run.
         """
-        state = self.state
-        self._on_mesh()
+        state, operators = self.state, self.operators
         if "a_factored" in saved:
-            state.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
-            self._a_solver = LaggedCholesky(state.a_matrix, ~state.dirichlet, self.max_cg)
+            operators.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
+            self._a_solver = LaggedCholesky(operators.a_matrix, ~state.dirichlet, self.max_cg)
         if "b_factored" in saved:
-            state.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
-            self._b_solver = LaggedCholesky(state.b_matrix, saved["b_free"], self.max_cg)
+            operators.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
+            self._b_solver = LaggedCholesky(operators.b_matrix, saved["b_free"], self.max_cg)

@@ -257,7 +257,7 @@ def alternating_minimization(
     strategy = strategy or nonlinear_strategy(solver)
     state.v_values[state.crack_set()] = 0.0
     half_steps.start()
-    strategy.start(state)
+    strategy.start(state, half_steps)
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec

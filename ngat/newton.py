@@ -28,6 +28,7 @@ import numpy as np
 from ngsolve import BilinearForm, dx
 from scipy.linalg import eigh_tridiagonal
 
+from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError
 from ngat.state import ATState
 
@@ -46,7 +47,11 @@ class NewtonSolver:
     Parameters
     ----------
     state
-        Fields and model.
+        Mesh, fields and model.
+    half_steps
+        The half-steps' solvers of ``state``, whose operators hold the P1 graph the Hessian's
+        blocks are built from (:attr:`ngat.halfsteps.HalfStepSolvers.operators`); default new
+        ones.
     armijo
         Sufficient-decrease constant c of I(P(w + sδ)) ≤ I(w) + c s ∇I·δ.
     max_halvings
@@ -72,6 +77,7 @@ class NewtonSolver:
     def __init__(
         self,
         state: ATState,
+        half_steps: HalfStepSolvers | None = None,
         armijo: float = 1e-4,
         max_halvings: int = 10,
         lanczos_steps: int = 10,
@@ -83,6 +89,7 @@ class NewtonSolver:
                 "choose nonlinear=am, overrelaxed or anderson"
             )
         self.state = state
+        self.half_steps = half_steps or HalfStepSolvers(state)
         self.armijo = armijo
         self.max_halvings = max_halvings
         self.lanczos_steps = lanczos_steps
@@ -97,12 +104,12 @@ class NewtonSolver:
 
         The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model: c
         components, component-major) and of v (behind u's): every one of its (c + 1)² blocks
-        has the graph G of the P1 space, whose positions of the element couplings the state's
-        assembler of b_j already holds. NGSolve builds the block graph itself, by one assembly
-        of a form on the product space (its CSR rows sorted, so row (I, a) starts at
-        I (c + 1) nnz(G) + (c + 1) rowptr_G[a] and holds the columns of component J at
-        J deg(a) + the position in row a of G); each local entry's position follows by that
-        arithmetic, without a search.
+        has the graph G of the P1 space, whose positions of the element couplings the
+        assembler of b_j already holds (:class:`ngat.operators.LumpedOperators`). NGSolve
+        builds the block graph itself, by one assembly of a form on the product space (its CSR
+        rows sorted, so row (I, a) starts at I (c + 1) nnz(G) + (c + 1) rowptr_G[a] and holds
+        the columns of component J at J deg(a) + the position in row a of G); each local
+        entry's position follows by that arithmetic, without a search.
         """
         state = self.state
         arrays = state.arrays
@@ -120,9 +127,11 @@ class NewtonSolver:
         self.entry_rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
         self.entry_cols = cols
         # Positions in G (the P1 graph of b_j) of each element's vertex pairs, and G's rows.
-        graph = state.b_assembler
+        operators = self.half_steps.operators
+        self.stiffness_parts = operators.stiffness_parts
+        graph = operators.b_assembler
         in_g = graph.position.reshape(arrays.ne, 3, 3)
-        _, _, rowptr_g = state.b_matrix.CSR()
+        _, _, rowptr_g = operators.b_matrix.CSR()
         rowptr_g = np.asarray(rowptr_g, dtype=np.int64)
         degree, block = np.diff(rowptr_g), (c + 1) * graph.nnz
         el = arrays.elements
@@ -156,7 +165,7 @@ class NewtonSolver:
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
         state = self.state
-        uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, state.stiffness_parts)
+        uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts)
         local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
         return np.bincount(self.position, weights=local, minlength=self.nnz)
 

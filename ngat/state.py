@@ -1,13 +1,12 @@
-"""The discrete state on one mesh: P1 fields u, v, the previous step's v, and their operators.
+"""The discrete state: the mesh, the P1 fields u, v and the previous step's v, and their data.
 
 :class:`ATState` owns the mesh, the P1 spaces and the GridFunctions (all ``autoupdate=True``, so
-``mesh.Refine()`` prolongates them exactly), the Dirichlet and crack DOF masks, the loads, and
-the matrices of the two half-steps, a_j(v; u, φ) of the u-step and b_j(u; v, ψ) of the v-step
-(paper, Algorithm 1, steps 2.1 and 2.2). Per mesh, each matrix graph is built once by one
-NGSolve assembly; :meth:`ATState.assemble_a` and :meth:`ATState.assemble_b` then rewrite only
-the values in place, from the vectorised element assembly of :mod:`ngat.forms`. The state
-evaluates I_j (eq. 7), the reaction forces and the mesh measures; how the half-steps are solved
-is :mod:`ngat.halfsteps`, and the nonlinear solvers of a load step are :mod:`ngat.strategies`.
+``mesh.Refine()`` prolongates them exactly), and what fixes the fields' admissible sets: the
+Dirichlet regions with their loads g(t) and the crack DOF masks (the initial crack, and CR(t_k)
+of the paper's Section 1.2). It evaluates I_j (eq. 7) at its fields through the model's
+:class:`ngat.functional.LumpedFunctional` and reports the mesh measures. The matrices of the two
+half-steps are :mod:`ngat.operators`, how the half-steps are solved is :mod:`ngat.halfsteps`, and
+the nonlinear solvers of a load step are :mod:`ngat.strategies`.
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule
 
 from ngat.elasticity import elasticity
 from ngat.estimators import EdgeTopology
-from ngat.forms import LumpedAssembler, MeshArrays, a_form, b_form
+from ngat.forms import MeshArrays
 from ngat.functional import LumpedFunctional
 from ngat.parameters import ModelParameters
 from ngat.timing import PhaseTimer
@@ -38,7 +37,7 @@ class SceneError(ValueError):
 
 
 class ATState:
-    """Fields and lumped operators of the Ambrosio–Tortorelli problem on one mesh.
+    """Mesh and fields of the Ambrosio–Tortorelli problem, with their Dirichlet and crack data.
 
     Parameters
     ----------
@@ -102,28 +101,7 @@ class ATState:
         """Rebuild everything that depends on the mesh (call after ``mesh.Refine()``)."""
         with self.timer("assembly"):
             self.arrays = arrays = MeshArrays(self.mesh)
-            # One NGSolve assembly of a_j builds the graph; b_j has the same graph when u is
-            # scalar, and both get their values from the vectorised assemblers (equal to
-            # a_form and b_form, checked in tests/test_forms.py).
-            density = self.elasticity
-            self.a_matrix = (
-                a_form(self.fes_u, self.v, self.model.eta, bilinear=density.bilinear).Assemble().mat
-            )
-            self.assembler = LumpedAssembler(
-                arrays, self.a_matrix, self.model.lumping,
-                density.element_dofs(arrays), density.element_stiffness(arrays),
-            )  # fmt: skip
-            self.stiffness_parts = density.parts(arrays)
-            if density.components == 1:
-                self.b_matrix = self.a_matrix.CreateMatrix()
-                self.b_assembler = self.assembler
-            else:
-                self.b_matrix = (
-                    b_form(self.fes, self.u, self.model.surface, bilinear=density.bilinear)
-                    .Assemble()
-                    .mat
-                )
-                self.b_assembler = LumpedAssembler(arrays, self.b_matrix, self.model.lumping)
+            count = self.elasticity.components
             self.region_vertices = {}
             self.region_dofs = {}
             for name, components in self.load_components.items():
@@ -133,7 +111,7 @@ class ATState:
                     else self.mesh.Boundaries(name)
                 )
                 vertices = np.array(self.fes.GetDofs(region), dtype=bool)
-                dofs = np.zeros((density.components, arrays.nv), dtype=bool)
+                dofs = np.zeros((count, arrays.nv), dtype=bool)
                 dofs[components] = vertices
                 self.region_vertices[name], self.region_dofs[name] = vertices, dofs.ravel()
             dirichlet = np.logical_or.reduce(list(self.region_dofs.values()))
@@ -281,72 +259,19 @@ class ATState:
                 total = np.bincount(vertices, weights=component, minlength=nv)
                 out[i * nv : (i + 1) * nv][dofs] = total[dofs] / count[dofs]
 
-    # -- in-place assembly ------------------------------------------------------------------
-    def u_matrix_values(self) -> np.ndarray:
-        """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).
-
-        Each element contributes c_T K_T, c_T = ∫_T P_j(v²)/|T| + η; with an energy split, the
-        weights of its parts follow the sign of tr ε(u) on T (:mod:`ngat.elasticity`).
-        """
-        c = self.assembler.square_mean(self.v_values) + self.model.eta
-        weights = self.functional.u_step_weights(self.arrays, self.u_values, c)
-        return self.assembler.weighted_values(weights, self.stiffness_parts)
-
-    def assemble_a(self) -> None:
-        """Write a_j(v; ·, ·) at the current fields into ``a_matrix``, in place."""
-        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
-
-    def assemble_b(self) -> None:
-        """Write b_j(u; ·, ·) at the current u into ``b_matrix``, in place.
-
-        b_j of Definition 2 with W⁺(u)/G_c in place of |∇u|² and the model's crack density
-        (:mod:`ngat.crack_density`).
-        """
-        density = self.functional.v_step_density(self.arrays, self.u_values)
-        values = self.b_assembler.b_values(density, self.model.surface)
-        self.b_matrix.AsVector().FV().NumPy()[:] = values
-
     # -- records ----------------------------------------------------------------------------
     def energies(self) -> dict[str, float]:
         """Return bulk, surface and total energy of I_j (paper, eq. 7).
 
         With ``lumping=False`` the P_j in eq. (7) are dropped and the integrals are exact.
         """
-        return self.functional.energies(
-            self.arrays, self.u_values, self.v_values, self.assembler.square_mean
-        )
+        return self.functional.energies(self.arrays, self.u_values, self.v_values)
 
-    def bulk_energy(self, u: np.ndarray) -> float:
-        """Return ∫ (P_j(v²) + η) W⁺(u) + W⁻(u) at the current v for the DOF values ``u``."""
-        c = self.assembler.square_mean(self.v_values) + self.model.eta
-        return self.functional.bulk(self.arrays, u, c)
-
-    def reaction_forces(self) -> dict[str, float]:
-        """Return the reaction force on each Dirichlet region and the load's conjugate force.
-
-        The residual r = A u of the u-equation vanishes at free DOFs; at a DOF of Ω_D it is the
-        nodal reaction. ``force_<region>`` = 2 Σ_{i∈Ω_D} r_i is the derivative of the bulk
-        energy with respect to a uniform shift of u on that region (plane models:
-        ``force_<region>_x`` and ``_y`` per component); ``force`` = 2 r·∂g/∂t is the derivative
-        of the bulk energy with respect to the load parameter t.
-        """
-        self.assemble_a()
-        product = self.a_matrix.CreateColVector()
-        product.data = self.a_matrix * self.u.vec
-        residual = 2 * product.FV().NumPy()
-        components = self.elasticity.components
-        forces = {}
-        for name, dofs in self.region_dofs.items():
-            if components == 1:
-                forces[f"force_{name}"] = float(residual[dofs].sum())
-                continue
-            per_component = np.where(dofs, residual, 0.0).reshape(components, -1).sum(axis=1)
-            for i in self.load_components[name]:
-                forces[f"force_{name}_{'xy'[i]}"] = float(per_component[i])
-        rate = np.zeros_like(residual)
+    def load_rate_values(self) -> np.ndarray:
+        """Return ∂g/∂t at the current t on every Dirichlet DOF (0 elsewhere)."""
+        rate = np.zeros(self.fes_u.ndof)
         self._interpolate(self.load_rates, rate)
-        forces["force"] = float(np.dot(residual[self.dirichlet], rate[self.dirichlet]))
-        return forces
+        return rate
 
     def mesh_measures(self) -> dict[str, float]:
         """Return element and vertex counts, element diameters, the range of v and ``h_crack``.

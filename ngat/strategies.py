@@ -26,6 +26,7 @@ from typing import Protocol
 import numpy as np
 from ngsolve import GridFunction
 
+from ngat.halfsteps import HalfStepSolvers
 from ngat.newton import NewtonSolver
 from ngat.parameters import SolverParameters
 from ngat.state import ATState
@@ -91,8 +92,12 @@ class NonlinearStrategy(Protocol):
 
     statistics: NonlinearStatistics
 
-    def start(self, state: ATState) -> None:
-        """Begin a load step: forget the last step's iterates, count from zero."""
+    def start(self, state: ATState, half_steps: HalfStepSolvers) -> None:
+        """Begin a load step: forget the last step's iterates, count from zero.
+
+        ``half_steps`` are the loop's solvers of the half-steps on ``state``, with the
+        operators of its current mesh.
+        """
 
     def accept_u_step(self, state: ATState) -> bool:
         """After a u-step: return ``False`` if the strategy restored the plain iterate.
@@ -122,7 +127,7 @@ class AlternatingMinimization:
     def __init__(self) -> None:
         self.statistics = NonlinearStatistics()
 
-    def start(self, state: ATState) -> None:
+    def start(self, state: ATState, half_steps: HalfStepSolvers) -> None:
         """Begin a load step: the statistics count from zero."""
         self.statistics = NonlinearStatistics()
 
@@ -165,9 +170,9 @@ class Accelerated(AlternatingMinimization):
         self.has_plain = False
         self.plain_energy = np.inf
 
-    def start(self, state: ATState) -> None:
+    def start(self, state: ATState, half_steps: HalfStepSolvers) -> None:
         """Begin a load step without history."""
-        super().start(state)
+        super().start(state, half_steps)
         self.plain, self.plain_energy = None, np.inf
         self.restart()
 
@@ -282,7 +287,7 @@ class NewtonSwitch:
     tried from the iterate. A rejected step lowers the threshold to half the current change
     (Newton is too far from a minimiser: wait until the iteration has halved it); an accepted
     one restarts the acceleration's history. The Newton solver is kept across load steps as
-    long as the state is the same.
+    long as the half-steps' solvers (and so the state) are the same.
 
     Parameters
     ----------
@@ -316,11 +321,11 @@ class NewtonSwitch:
             curvature_solves=iteration.curvature_solves + curvature,
         )
 
-    def start(self, state: ATState) -> None:
+    def start(self, state: ATState, half_steps: HalfStepSolvers) -> None:
         """Begin a load step: the iteration's, and Newton's on the state's current mesh."""
-        self.iteration.start(state)
-        if self.newton is None or self.newton.state is not state:
-            self.newton = NewtonSolver(state)
+        self.iteration.start(state, half_steps)
+        if self.newton is None or self.newton.half_steps is not half_steps:
+            self.newton = NewtonSolver(state, half_steps)
         self.newton.restart()
         self.below, self.previous = self.switch, np.inf
         self.newton_steps = self.escapes = self.rejected = 0

@@ -18,6 +18,7 @@ from ngat.geometries import surfing_mode_i
 from ngat.halfsteps import HalfStepSolvers
 from ngat.linear import AMGConjugateGradient
 from ngat.minimization import StepResult
+from ngat.operators import LumpedOperators
 from ngat.parameters import ParameterError, Parameters
 from ngat.scene import load_scene
 from ngat.state import ATState
@@ -109,10 +110,11 @@ def test_invalid_linear_solver_is_named():
 
 def test_cg_stopped_at_its_cap_is_reported(bounded, caplog):
     state = bounded["cg-h1amg"].state
-    state.assemble_a()
+    operators = LumpedOperators(state)
+    operators.assemble_a()
     form = a_form(H1(state.mesh, order=1), state.v, state.model.eta)
-    solver = AMGConjugateGradient([form], state.a_matrix, ~state.dirichlet, maxiter=2)
-    rhs, solution = state.a_matrix.CreateColVector(), state.a_matrix.CreateColVector()
+    solver = AMGConjugateGradient([form], operators.a_matrix, ~state.dirichlet, maxiter=2)
+    rhs, solution = operators.a_matrix.CreateColVector(), operators.a_matrix.CreateColVector()
     rhs.FV().NumPy()[:] = np.where(state.dirichlet, 0.0, 1.0)  # CG cannot meet it in 2 iterations
     with caplog.at_level(logging.WARNING, logger="ngat.linear"):
         solver.solve(rhs, solution)

@@ -104,11 +104,12 @@ def test_bounded_v_step_keeps_the_consistent_mass_v_in_unit_interval(scene, mesh
     assert v.max() <= 1 + 1e-12
     # Karush–Kuhn–Tucker conditions of min I_j over 0 ≤ v ≤ 1: the gradient B v − α m vanishes
     # where v is inside, is ≤ 0 where v = 1 and ≥ 0 where v = 0 (off the crack line).
-    state.b_matrix.AsVector().FV().NumPy()[:] = state.assembler.b_values(
+    operators = steps.operators
+    operators.b_matrix.AsVector().FV().NumPy()[:] = operators.assembler.b_values(
         np.zeros(state.arrays.ne), state.model.surface
     )
-    gradient = state.b_matrix.CreateColVector()
-    gradient.data = state.b_matrix * state.v.vec
+    gradient = operators.b_matrix.CreateColVector()
+    gradient.data = operators.b_matrix * state.v.vec
     gradient = gradient.FV().NumPy() - state.model.alpha * state.arrays.mass
     free = ~state.crack_set()
     scale = np.abs(gradient).max()

@@ -83,7 +83,7 @@ def test_reaction_force_is_the_load_derivative_of_the_bulk_energy(quick_run):
         energies.append(state.energies()["bulk"])
     state.apply_load(t)
     steps.solve_u()
-    forces = state.reaction_forces()
+    forces = steps.operators.reaction_forces()
     assert abs(forces["force"] - (energies[1] - energies[0]) / (2 * h)) < 1e-8 * abs(
         forces["force"]
     )

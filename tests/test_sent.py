@@ -35,7 +35,7 @@ def test_top_edge_holds_only_u_y():
     np.testing.assert_array_equal(uy[bottom], 0.0)
     # u_x is free on the top edge: the Poisson contraction moves it.
     assert np.ptp(ux[top]) > 1e-5
-    assert set(state.reaction_forces()) == {
+    assert set(steps.operators.reaction_forces()) == {
         "force_bottom_x", "force_bottom_y", "force_top_y", "force",
     }  # fmt: skip
 

@@ -10,6 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 from ngat.driver import run
+from ngat.halfsteps import HalfStepSolvers
 from ngat.newton import NewtonSolver
 from ngat.parameters import NONLINEAR_SOLVERS
 from ngat.scene import load_scene
@@ -154,10 +155,11 @@ def test_newton_switch_keeps_the_newton_solver_of_a_state_across_load_steps():
     strategy = nonlinear_strategy(parameters.solver)
     assert isinstance(strategy, NewtonSwitch)
     state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
-    strategy.start(state)
+    half_steps = HalfStepSolvers(state)
+    strategy.start(state, half_steps)
     newton = strategy.newton
-    strategy.start(state)
+    strategy.start(state, half_steps)
     assert strategy.newton is newton
     other = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
-    strategy.start(other)
+    strategy.start(other, HalfStepSolvers(other))
     assert strategy.newton.state is other

@@ -1,0 +1,126 @@
+"""The matrices of the two half-steps on one mesh, written in place at the current fields.
+
+a_j(v; u, φ) of the u-step and b_j(u; v, ψ) of the v-step (paper, Algorithm 1, steps 2.1 and
+2.2; Definition 2) as NGSolve sparse matrices. Per mesh each graph is built once by one NGSolve
+assembly of its form (:func:`ngat.forms.a_form`, :func:`~ngat.forms.b_form`); every later
+assembly only rewrites the values in place from the element coefficients of the functional
+(:class:`ngat.functional.LumpedFunctional`) by the vectorised :class:`ngat.forms.LumpedAssembler`,
+so that a factorisation can be refreshed with its symbolic part kept. The reaction forces are
+the residual of the u-equation at the Dirichlet DOFs, so they live here too.
+
+:class:`LumpedOperators` belongs to one mesh of an :class:`ngat.state.ATState` (the state holds
+the mesh and the fields); :class:`ngat.halfsteps.HalfStepSolvers` makes a new one after every
+refinement.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ngat.forms import LumpedAssembler, a_form, b_form
+from ngat.state import ATState
+
+__all__ = ["LumpedOperators"]
+
+
+class LumpedOperators:
+    """a_j and b_j of a state's current mesh, and the reaction forces.
+
+    Parameters
+    ----------
+    state
+        Mesh and fields; the operators serve its mesh as it is now (``state.arrays``).
+
+    Attributes
+    ----------
+    a_matrix, b_matrix
+        The matrices of a_j (on the space of u) and b_j (on the P1 space of v); for a scalar
+        u they share the graph.
+    assembler, b_assembler
+        Their in-place assemblers; ``b_assembler`` holds the positions of the element couplings
+        in the P1 graph (which Newton's block graph is built from, :mod:`ngat.newton`).
+    stiffness_parts
+        The element matrices of a_j's parts (one without an energy split).
+    arrays
+        The mesh arrays the operators were built on.
+    """
+
+    def __init__(self, state: ATState):
+        self.state = state
+        self.arrays = arrays = state.arrays
+        model, density = state.model, state.elasticity
+        with state.timer("assembly"):
+            # One NGSolve assembly of a_j builds the graph; b_j has the same graph when u is
+            # scalar, and both get their values from the vectorised assemblers (equal to
+            # a_form and b_form, checked in tests/test_forms.py).
+            self.a_matrix = (
+                a_form(state.fes_u, state.v, model.eta, bilinear=density.bilinear).Assemble().mat
+            )
+            self.assembler = LumpedAssembler(
+                arrays, self.a_matrix, model.lumping,
+                density.element_dofs(arrays), density.element_stiffness(arrays),
+            )  # fmt: skip
+            self.stiffness_parts = density.parts(arrays)
+            if density.components == 1:
+                self.b_matrix = self.a_matrix.CreateMatrix()
+                self.b_assembler = self.assembler
+            else:
+                self.b_matrix = (
+                    b_form(state.fes, state.u, model.surface, bilinear=density.bilinear)
+                    .Assemble()
+                    .mat
+                )
+                self.b_assembler = LumpedAssembler(arrays, self.b_matrix, model.lumping)
+
+    def u_matrix_values(self) -> np.ndarray:
+        """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).
+
+        Each element contributes c_T K_T, c_T = ∫_T P_j(v²)/|T| + η; with an energy split, the
+        weights of its parts follow the sign of tr ε(u) on T (:mod:`ngat.elasticity`).
+        """
+        state = self.state
+        c = state.functional.coefficient(self.arrays, state.v_values)
+        weights = state.functional.u_step_weights(self.arrays, state.u_values, c)
+        return self.assembler.weighted_values(weights, self.stiffness_parts)
+
+    def assemble_a(self) -> None:
+        """Write a_j(v; ·, ·) at the current fields into ``a_matrix``, in place."""
+        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
+
+    def assemble_b(self) -> None:
+        """Write b_j(u; ·, ·) at the current u into ``b_matrix``, in place.
+
+        b_j of Definition 2 with W⁺(u)/G_c in place of |∇u|² and the model's crack density
+        (:mod:`ngat.crack_density`).
+        """
+        state = self.state
+        density = state.functional.v_step_density(self.arrays, state.u_values)
+        values = self.b_assembler.b_values(density, state.model.surface)
+        self.b_matrix.AsVector().FV().NumPy()[:] = values
+
+    def reaction_forces(self) -> dict[str, float]:
+        """Return the reaction force on each Dirichlet region and the load's conjugate force.
+
+        The residual r = A u of the u-equation vanishes at free DOFs; at a DOF of Ω_D it is the
+        nodal reaction. ``force_<region>`` = 2 Σ_{i∈Ω_D} r_i is the derivative of the bulk
+        energy with respect to a uniform shift of u on that region (plane models:
+        ``force_<region>_x`` and ``_y`` per component); ``force`` = 2 r·∂g/∂t is the derivative
+        of the bulk energy with respect to the load parameter t.
+        """
+        state = self.state
+        self.assemble_a()
+        product = self.a_matrix.CreateColVector()
+        product.data = self.a_matrix * state.u.vec
+        residual = 2 * product.FV().NumPy()
+        components = state.elasticity.components
+        forces = {}
+        for name, dofs in state.region_dofs.items():
+            if components == 1:
+                forces[f"force_{name}"] = float(residual[dofs].sum())
+                continue
+            per_component = np.where(dofs, residual, 0.0).reshape(components, -1).sum(axis=1)
+            for i in state.load_components[name]:
+                forces[f"force_{name}_{'xy'[i]}"] = float(per_component[i])
+        rate = state.load_rate_values()
+        forces["force"] = float(np.dot(residual[state.dirichlet], rate[state.dirichlet]))
+        return forces
