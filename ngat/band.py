@@ -85,7 +85,9 @@ def band_elements(
     """Return the elements that come within ``radius`` of any of the ``centres``.
 
     An element is taken when its first vertex lies within ``radius + diameter`` of a centre,
-    which holds for every element that meets the disc of that radius (and a few more).
+    which holds for every element that meets the disc of that radius (and a few more). The
+    search stops at ``radius`` plus the largest diameter, so elements far from every centre
+    cost next to nothing.
 
     Parameters
     ----------
@@ -107,7 +109,8 @@ def band_elements(
     """
     if len(centres) == 0 or len(elements) == 0:
         return np.zeros(len(elements), dtype=bool)
-    distance, _ = cKDTree(centres).query(coords[elements[:, 0]])
+    reach = radius + diameter.max()
+    distance, _ = cKDTree(centres).query(coords[elements[:, 0]], distance_upper_bound=reach)
     return distance <= radius + diameter
 
 
@@ -156,6 +159,7 @@ class CrackBand:
         elements: np.ndarray,
         damaged: np.ndarray,
         tips: np.ndarray,
+        diameter: np.ndarray | None = None,
     ) -> np.ndarray:
         """Return the elements wider than the target within the band around the centres.
 
@@ -165,8 +169,11 @@ class CrackBand:
             Vertex coordinates and element vertex numbers of the current mesh.
         damaged, tips
             The centres of :meth:`centres`.
+        diameter
+            The elements' diameters, if known (else computed).
         """
-        diameter = element_diameters(coords, elements)
+        if diameter is None:
+            diameter = element_diameters(coords, elements)
         coarse = np.flatnonzero(diameter > self.target)
         marked = np.zeros(len(elements), dtype=bool)
         if len(coarse) == 0:
@@ -218,16 +225,20 @@ class CrackBand:
         int
             Number of bisection rounds (0: no coarse element within the trigger's reach).
         """
-        damaged, centres = self.centres(state)
-        coords, elements = state.arrays.coords, state.arrays.elements
-        marked = self.marked(coords, elements, damaged, centres)
-        if not self.triggered(coords, elements[marked], damaged, centres):
+        arrays = state.arrays
+        with state.timer("band"):
+            damaged, centres = self.centres(state)
+            coords, elements = arrays.coords, arrays.elements
+            marked = self.marked(coords, elements, damaged, centres, arrays.diameter)
+            triggered = self.triggered(coords, elements[marked], damaged, centres)
+        if not triggered:
             return 0
         rounds = 0
         while rounds < MAX_ROUNDS and bisect(state, marked):
             rounds += 1
-            coords, elements = mesh_geometry(state.mesh)
-            marked = self.marked(coords, elements, damaged, centres)
+            with state.timer("band"):
+                coords, elements = mesh_geometry(state.mesh)
+                marked = self.marked(coords, elements, damaged, centres)
         if rounds:
             rebuild(state)
             log.debug("crack band: %d rounds, %d elements", rounds, state.arrays.ne)
