@@ -328,6 +328,11 @@ def main() -> None:
         "--adaptive", type=float, nargs="+", default=None, metavar="R/EPS",
         help="adaptive runs (adapt=band defaults, unstructured mesh of maxh = 10 eps) instead",
     )  # fmt: skip
+    parser.add_argument(
+        "--eta", type=float, default=None,
+        help="residual stiffness eta (default the package's, 1e-5): a crack band stores "
+        "energy ~ eta [u]^2 / h per unit length (docs/adaptivity.md)",
+    )  # fmt: skip
     args = parser.parse_args()
     cases = [(R / QUICK["steady"][0], 1.0)] if args.quick else STUDY
     if args.cases:
@@ -342,6 +347,9 @@ def main() -> None:
         tag += "" if args.mode == "iii" else "_mode_i"
         tag += "_precrack" if args.precrack else ""
         options = {"mode": args.mode, "precrack": args.precrack}
+        if args.eta is not None:
+            options["eta"] = args.eta
+            tag += f"_eta{args.eta:g}"
         a = critical_amplitude(eps, h, args.out / f"critical_{tag}", **options)
         b = steady_propagation(
             eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
@@ -357,6 +365,7 @@ def main() -> None:
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),
              "tip_g_drift": round(b["tip_g_drift"], 4),
              "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
+             "eta": args.eta,
              "steps": args.steps, "skip": args.skip}
         )  # fmt: skip
         print(rows[-1], flush=True)
