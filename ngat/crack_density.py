@@ -79,7 +79,7 @@ class CrackDensity:
         return float(
             q * np.dot(arrays.area, arrays.square_mean(1 - v, lumped))
             + 2 * (f - q) * np.dot(arrays.mass, 1 - v)
-            + self.diffusion * np.sum(arrays.area * (grad_v**2).sum(1))
+            + self.diffusion * np.sum(arrays.area * (grad_v[:, 0] ** 2 + grad_v[:, 1] ** 2))
         )
 
     def critical_density(self) -> float:

@@ -21,7 +21,7 @@ from scipy.sparse import csr_matrix
 
 from ngat.crack_density import CrackDensity
 from ngat.elasticity import AntiPlane, Elasticity
-from ngat.forms import MeshArrays
+from ngat.forms import MeshArrays, row_sum
 
 __all__ = ["EdgeTopology", "flux_jumps", "mu_estimator", "nu_estimator", "meets"]
 
@@ -132,17 +132,18 @@ class EdgeTopology:
 
     def element_sum(self, per_edge: np.ndarray) -> np.ndarray:
         """Return Σ_{e⊂∂T} per_edge[e] for every element T, shape (ne,)."""
-        return per_edge[self.element_edges].sum(axis=1)
+        return row_sum(per_edge[self.element_edges])
 
 
 def meets(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     """Return the elements with at least one vertex in the vertex mask, shape (ne,)."""
-    return mask[arrays.elements].any(axis=1)
+    first, second, third = arrays.corners
+    return mask[first] | mask[second] | mask[third]
 
 
 def _linear_square_integral(arrays: MeshArrays, values: np.ndarray) -> np.ndarray:
     """Return ∫_T w² for w linear on T with vertex values ``values`` (ne, 3): the P1 mass matrix."""
-    return arrays.area / 12 * ((values**2).sum(axis=1) + values.sum(axis=1) ** 2)
+    return arrays.area / 12 * (row_sum(values * values) + row_sum(values) ** 2)
 
 
 def flux_jumps(
@@ -236,7 +237,7 @@ def mu_estimator(
     if fixed is not None:
         held = fixed.reshape(elasticity.components, -1)[:, edges.vertices].all(axis=2).T
         jumps = np.where(held, 0.0, jumps)
-    per_edge = weight * (jumps**2).sum(axis=1)
+    per_edge = weight * row_sum(jumps * jumps)
     if intact is not None:
         # The flux (v² + η) s⁺ + s⁻ of an energy split: its jump is (v² + η)[s⁺n] + [s⁻n].
         intact_jumps = np.where(held, 0.0, edges.element_flux_jump(intact))

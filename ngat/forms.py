@@ -29,6 +29,7 @@ from ngat.crack_density import CrackDensity
 __all__ = [
     "vertex_rule",
     "element_diameters",
+    "row_sum",
     "lumped_dx",
     "exact_dx",
     "a_form",
@@ -155,11 +156,24 @@ def mesh_edges(elements: np.ndarray) -> np.ndarray:
     return np.stack([keys // size, keys % size], axis=1)
 
 
+def row_sum(values: np.ndarray) -> np.ndarray:
+    """Return ``values.sum(axis=1)`` of an (n, k) array with few columns, column by column.
+
+    The same numbers as numpy's reduction (which adds a short row in order), several times
+    faster for k = 2 or 3, where the reduction's per-row overhead dominates.
+    """
+    total = values[:, 0].copy()
+    for column in range(1, values.shape[1]):
+        total += values[:, column]
+    return total
+
+
 def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """Return the diameter h_T (longest edge) of each triangle."""
     xy = coords[elements]
     edges = xy[:, [1, 2, 0]] - xy
-    return np.sqrt((edges**2).sum(axis=2)).max(axis=1)
+    lengths = np.sqrt(edges[..., 0] * edges[..., 0] + edges[..., 1] * edges[..., 1])
+    return np.maximum(np.maximum(lengths[:, 0], lengths[:, 1]), lengths[:, 2])
 
 
 class MeshArrays:
@@ -250,7 +264,7 @@ class MeshArrays:
         if lumped:
             return self.vertex_mean(values * values)
         local = values[self.elements]
-        return ((local * local).sum(axis=1) + local.sum(axis=1) ** 2) / 12
+        return (row_sum(local * local) + row_sum(local) ** 2) / 12
 
 
 class LumpedAssembler:
