@@ -23,9 +23,9 @@ checkout's root: the two versions never share a process and are measured by the 
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max), the share
-of the wall time per phase (the phases both checkouts time), linear solves, final elements,
-fracture time, the error of E(1.0) against ``geometries/reference/two_slits.json``, peak
-memory, and the ratio current/REV of the median wall times.
+of the wall time per phase ("–" where a checkout does not time a phase), linear solves, final
+elements, fracture time, the error of E(1.0) against ``geometries/reference/two_slits.json``,
+peak memory, and the ratio current/REV of the median wall times.
 """
 
 from __future__ import annotations
@@ -200,6 +200,8 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
         "wall_max_s": max(walls),
         "phase_share": {
             p: round(statistics.median(b["phases_s"][p] / b["wall_s"] for b in benches), 3)
+            if all(p in (b.get("phases_s") or {}) for b in benches)
+            else None
             for p in phases
         },
         "linear_solves": agreed([b.get("linear_solves") for b in benches]),
@@ -210,11 +212,17 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
     }
 
 
-def common_phases(runs: dict[str, list[dict]]) -> list[str]:
-    """Return the phases every run times, in the order of the first run."""
-    timed = [set(b.get("phases_s") or {}) for benches in runs.values() for b in benches]
-    first = next(iter(runs.values()))[0].get("phases_s") or {}
-    return [p for p in first if all(p in t for t in timed)]
+def timed_phases(runs: dict[str, list[dict]]) -> list[str]:
+    """Return the phases any run times, in the order they first appear.
+
+    A checkout that does not time a phase (an older one) shows ``–`` there; its time is in
+    its ``other``.
+    """
+    phases: dict[str, None] = {}
+    for benches in runs.values():
+        for bench in benches:
+            phases.update(dict.fromkeys(bench.get("phases_s") or {}))
+    return list(phases)
 
 
 def cell(value: Any, digits: int | None = None) -> str:
@@ -226,6 +234,11 @@ def cell(value: Any, digits: int | None = None) -> str:
     if digits is not None:
         return f"{value:.{digits}f}"
     return f"{value:,}" if isinstance(value, int) else f"{value:g}"
+
+
+def percent(share: float | None) -> float | None:
+    """Return a share in per cent (``None`` stays ``None``)."""
+    return None if share is None else 100 * share
 
 
 def table(comparison: dict) -> str:
@@ -243,7 +256,7 @@ def table(comparison: dict) -> str:
     line("wall time median [s]", lambda r: cell(r["wall_median_s"], 1))
     line("wall time min – max [s]", lambda r: f"{r['wall_min_s']:.1f} – {r['wall_max_s']:.1f}")
     for phase in comparison["phases"]:
-        line(f"share {phase} [%]", lambda r, p=phase: cell(100 * r["phase_share"][p], 1))
+        line(f"share {phase} [%]", lambda r, p=phase: cell(percent(r["phase_share"][p]), 1))
     line("linear solves", lambda r: cell(r["linear_solves"]))
     line("final elements", lambda r: cell(r["final_elements"]))
     line("fracture time", lambda r: cell(r["fracture_time"]))
@@ -277,7 +290,7 @@ def compare(revision: str, repeats: int, quick: bool, out: Path) -> None:
             for name, root in roots.items():
                 runs[name].append(bench_child(root, quick))
                 print(f"run {k + 1}/{repeats} {labels[name]}: {runs[name][-1]['wall_s']} s")
-    phases = common_phases(runs)
+    phases = timed_phases(runs)
     summary = {name: summarise(benches, phases) for name, benches in runs.items()}
     comparison = {
         "against": revision,
