@@ -48,7 +48,8 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     np.ndarray
         (nv,) int labels: the component of each vertex of the set, ``-1`` outside it.
     """
-    edges = arrays.edges[mask[arrays.edges].all(axis=1)]
+    first, second = arrays.edges.T
+    edges = arrays.edges[mask[first] & mask[second]]
     graph = coo_matrix(
         (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])),
         shape=(arrays.nv, arrays.nv),
@@ -102,8 +103,12 @@ def crack_tips(
     for mouth, tip in slits:
         mouth, tip = np.asarray(mouth, dtype=float), np.asarray(tip, dtype=float)
         nearest = np.argmin(np.linalg.norm(coords - tip, axis=1))
-        h = arrays.diameter[(arrays.elements == nearest).any(axis=1)].max()
-        touching = cracked & (_distance_to_segment(coords, mouth, tip) <= h)
+        corners = arrays.corners
+        h = arrays.diameter[
+            (corners[0] == nearest) | (corners[1] == nearest) | (corners[2] == nearest)
+        ].max()
+        inside = np.flatnonzero(cracked)
+        touching = inside[_distance_to_segment(coords[inside], mouth, tip) <= h]
         crack = np.isin(labels, np.unique(labels[touching])) & cracked
         if not crack.any():
             tips.append((float(tip[0]), float(tip[1])))
