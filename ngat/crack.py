@@ -103,10 +103,8 @@ def crack_tips(
     for mouth, tip in slits:
         mouth, tip = np.asarray(mouth, dtype=float), np.asarray(tip, dtype=float)
         nearest = np.argmin(np.linalg.norm(coords - tip, axis=1))
-        corners = arrays.corners
-        h = arrays.diameter[
-            (corners[0] == nearest) | (corners[1] == nearest) | (corners[2] == nearest)
-        ].max()
+        at = arrays.elements == nearest
+        h = arrays.diameter[at[:, 0] | at[:, 1] | at[:, 2]].max()
         inside = np.flatnonzero(cracked)
         touching = inside[_distance_to_segment(coords[inside], mouth, tip) <= h]
         crack = np.isin(labels, np.unique(labels[touching])) & cracked
