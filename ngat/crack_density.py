@@ -75,11 +75,10 @@ class CrackDensity:
         (:meth:`ngat.forms.MeshArrays.square_mean`); P_j(1 − v) integrates exactly.
         """
         q, f = self.reaction, self.source
-        grad_v = arrays.gradient(v)
         return float(
             q * np.dot(arrays.area, arrays.square_mean(1 - v, lumped))
             + 2 * (f - q) * np.dot(arrays.mass, 1 - v)
-            + self.diffusion * np.sum(arrays.area * (grad_v[:, 0] ** 2 + grad_v[:, 1] ** 2))
+            + self.diffusion * np.sum(arrays.area * arrays.squared_gradient(v))
         )
 
     def critical_density(self) -> float:

@@ -242,6 +242,11 @@ class MeshArrays:
         """Return the constant gradient of a P1 function on every element, shape (ne, 2)."""
         return (self._gradient_matrix @ values).reshape(self.ne, 2)
 
+    def squared_gradient(self, values: np.ndarray) -> np.ndarray:
+        """Return |∇w|² of a P1 function w on every element (the same numbers as summing rows)."""
+        gradient = self.gradient(values)
+        return gradient[:, 0] * gradient[:, 0] + gradient[:, 1] * gradient[:, 1]
+
     def vertex_mean(self, values: np.ndarray) -> np.ndarray:
         """Return the mean of nodal values over each element's vertices: ∫_T P_j f / |T|.
 
