@@ -2,11 +2,15 @@
 
 Algorithm 1 of the paper minimises I_j in u with v frozen, then in v with u frozen, until
 ‖v^n − v^{n−1}‖_∞ < ``am_tol``; I_j never increases from one half-step to the next (proof of
-Proposition 2). Algorithm 2 refines inside each half-step: solve, estimate (μ for the u-step,
-ν for the v-step, Proposition 4), mark, refine, until the estimator is ≤ TOL. The variant
-``"after"`` runs Algorithm 1 to convergence first and refines only then. The default ``"band"``
-is Algorithm 2 with the crack band resolved after every v-step (:class:`ngat.band.CrackBand`):
-an iteration that refined the band does not count as converged.
+Proposition 2). By default the test is on the distance to the fixed point estimated from the
+contraction of the last two changes (``am_stop="contraction"``,
+:func:`ngat.strategies.estimated_error`): where a crack front creeps, each change is a small
+fraction of the way still to go, and the paper's test on the change itself stops the step with
+the crack short of its equilibrium. Algorithm 2 refines inside each half-step: solve, estimate
+(μ for the u-step, ν for the v-step, Proposition 4), mark, refine, until the estimator is ≤ TOL.
+The variant ``"after"`` runs Algorithm 1 to convergence first and refines only then. The
+default ``"band"`` is Algorithm 2 with the crack band resolved after every v-step
+(:class:`ngat.band.CrackBand`): an iteration that refined the band does not count as converged.
 
 The loop is the same for every ``nonlinear`` solver, all with the same stopping test on an
 alternating-minimisation iteration; what a solver adds between the half-steps (acceleration,
@@ -30,7 +34,7 @@ from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
 from ngat.state import ATState
-from ngat.strategies import NonlinearStrategy, nonlinear_strategy
+from ngat.strategies import NonlinearStrategy, estimated_error, nonlinear_strategy
 
 __all__ = [
     "StepResult",
@@ -61,7 +65,7 @@ class StepResult:
     iterations
         Number of (u, v) iterations.
     converged
-        Whether ‖v^n − v^{n−1}‖_∞ fell below the tolerance.
+        Whether the stopping test (``am_stop``) fell below the tolerance.
     change
         The last ‖v^n − v^{n−1}‖_∞.
     refinements
@@ -213,6 +217,19 @@ def _refine_after(state: ATState, adaptivity: AdaptivityParameters, result: Step
     return _refine_by(state, indicators, adaptivity, result, "after")
 
 
+def _stopping_error(change: float, previous: float, moved: float, am_stop: str) -> float:
+    """Return what the loop compares with ``am_tol``.
+
+    ``am_stop="change"``: ‖v^n − v^{n−1}‖_∞ (the paper). ``"contraction"``: the distance to the
+    fixed point estimated from the last two changes (:func:`ngat.strategies.estimated_error`),
+    and at least the strategy's own step (a Newton step) since the last iteration: an iteration
+    is not converged while Newton still moves v further than the tolerance.
+    """
+    if am_stop == "change":
+        return change
+    return max(estimated_error(change, previous), moved)
+
+
 def alternating_minimization(
     state: ATState,
     solver: SolverParameters,
@@ -258,6 +275,7 @@ def alternating_minimization(
     state.v_values[state.crack_set()] = 0.0
     half_steps.start()
     strategy.start(state, half_steps)
+    previous, moved = np.inf, 0.0  # the last iteration's change, the strategy's step after it
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
         state.v_iter.vec.data = state.v.vec
@@ -284,19 +302,24 @@ def alternating_minimization(
             if energy > result.energies[-1] * (1 + 1e-10) + 1e-14:
                 result.energy_increases += 1
         result.energies.append(energy)
-        change = np.max(np.abs(state.v_values - state.v_iter.vec.FV().NumPy()))
-        result.change = float(change)
+        change = float(np.max(np.abs(state.v_values - state.v_iter.vec.FV().NumPy())))
+        result.change = change
         if not np.isfinite(change) or not np.isfinite(energy):
             raise ConvergenceError(
                 f"the alternating minimisation produced NaN/Inf at iteration {result.iterations}"
             )
-        if change < solver.am_tol and not band_rounds:
+        error = _stopping_error(change, previous, moved, solver.am_stop)
+        previous = change
+        if error < solver.am_tol and not band_rounds:
             if adaptivity.adapt == "after" and _refine_after(state, adaptivity, result):
                 continue
             result.converged = True
             result.reason = "converged"
             break
-        if strategy.after_iteration(state, float(change)):
+        before = state.v_values.copy()
+        moved = 0.0
+        if strategy.after_iteration(state, change):
+            moved = float(np.max(np.abs(state.v_values - before)))
             result.energies.append(state.energies()["total"])
     else:
         result.reason = "iteration limit"

@@ -158,6 +158,9 @@ NONLINEAR_SOLVERS = ("am", "overrelaxed", "anderson", "newton", "anderson-newton
 """The solvers of one load step, each a strategy of :mod:`ngat.strategies`
 (:data:`ngat.strategies.STRATEGIES`)."""
 
+AM_STOPS = ("contraction", "change")
+"""Stopping tests of the alternating minimisation (``SolverParameters.am_stop``)."""
+
 
 @dataclass(frozen=True)
 class SolverParameters:
@@ -166,7 +169,14 @@ class SolverParameters:
     Attributes
     ----------
     am_tol
-        Stop when ‖v^n − v^{n−1}‖_∞ < am_tol.
+        Stop when the distance to the fixed point, estimated from ‖v^n − v^{n−1}‖_∞, is below
+        am_tol (``am_stop``).
+    am_stop
+        ``"contraction"`` (default): the change ‖v^n − v^{n−1}‖_∞ multiplied by ρ/(1 − ρ)
+        where the iteration contracts slowly (ρ the ratio of the last two changes,
+        :func:`ngat.strategies.estimated_error`), so that a crack front creeping by a little
+        less than am_tol per iteration does not stop the step; ``"change"``: the change
+        itself (the paper, Algorithm 1).
     am_max_iter
         Iteration limit per load step.
     max_cg
@@ -205,6 +215,7 @@ class SolverParameters:
     """
 
     am_tol: float = 1e-3
+    am_stop: str = "contraction"
     am_max_iter: int = 1000
     max_cg: int = 0
     linear_solver: str = "direct"
@@ -219,6 +230,10 @@ class SolverParameters:
         """Raise :class:`ParameterError` naming the first invalid value."""
         if not self.am_tol > 0:
             raise ParameterError(f"am_tol must be positive, got am_tol={self.am_tol}")
+        if self.am_stop not in AM_STOPS:
+            raise ParameterError(
+                f"am_stop must be one of {', '.join(AM_STOPS)}, got {self.am_stop!r}"
+            )
         if not self.am_max_iter >= 1:
             raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
         if self.linear_solver not in ("direct", "cg-h1amg"):

@@ -420,6 +420,7 @@ PARAMETER_LABELS = {
     "eta": "residual stiffness η",
     "crtol": "crack-set tolerance CRTOL",
     "am_tol": "AM tolerance on max |Δv|",
+    "am_stop": "AM stopping test",
     "am_max_iter": "AM iterations per step at most",
     "max_cg": "CG iterations before refactorising",
     "omega": "over-relaxation factor ω",

@@ -333,6 +333,11 @@ def main() -> None:
         help="residual stiffness eta (default the package's, 1e-5): a crack band stores "
         "energy ~ eta [u]^2 / h per unit length (docs/adaptivity.md)",
     )  # fmt: skip
+    parser.add_argument(
+        "--am-stop", choices=["contraction", "change"], default=None,
+        help="stopping test of the alternating minimisation (default the package's, "
+        "contraction; change: the paper's, which stops a creeping crack early)",
+    )  # fmt: skip
     args = parser.parse_args()
     cases = [(R / QUICK["steady"][0], 1.0)] if args.quick else STUDY
     if args.cases:
@@ -350,6 +355,9 @@ def main() -> None:
         if args.eta is not None:
             options["eta"] = args.eta
             tag += f"_eta{args.eta:g}"
+        if args.am_stop is not None:
+            options["am_stop"] = args.am_stop
+            tag += f"_{args.am_stop}"
         a = critical_amplitude(eps, h, args.out / f"critical_{tag}", **options)
         b = steady_propagation(
             eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
@@ -365,7 +373,7 @@ def main() -> None:
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),
              "tip_g_drift": round(b["tip_g_drift"], 4),
              "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
-             "eta": args.eta,
+             "eta": args.eta, "am_stop": args.am_stop,
              "steps": args.steps, "skip": args.skip}
         )  # fmt: skip
         print(rows[-1], flush=True)

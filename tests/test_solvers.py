@@ -15,7 +15,14 @@ from ngat.newton import NewtonSolver
 from ngat.parameters import NONLINEAR_SOLVERS
 from ngat.scene import load_scene
 from ngat.state import ATState
-from ngat.strategies import STRATEGIES, NewtonSwitch, nonlinear_strategy, remaining_iterations
+from ngat.strategies import (
+    RATE_MAX,
+    STRATEGIES,
+    NewtonSwitch,
+    estimated_error,
+    nonlinear_strategy,
+    remaining_iterations,
+)
 
 TIMES = np.array([0.0, 0.5, 1.0, 1.2, 1.3])  # the last two steps are in the growth phase
 
@@ -143,6 +150,40 @@ def test_remaining_iterations_of_a_linearly_converging_iteration():
     assert remaining_iterations(0.05, 0.04, 1e-3) == np.inf  # not contracting (near a saddle)
     assert remaining_iterations(0.05, np.inf, 1e-3) == 0.0  # no rate yet
     assert remaining_iterations(1e-4, 1e-3, 1e-3) == 0.0
+
+
+@pytest.mark.parametrize("rate", [0.6, 0.9, 0.98])
+def test_estimated_error_is_the_distance_to_the_limit_of_a_geometric_sequence(rate):
+    # v_n = ρ^n → 0: changes ρ^{n−1}(1 − ρ), and ρ/(1 − ρ) times the last one is ρ^n exactly.
+    n = 40
+    change, previous = rate ** (n - 1) * (1 - rate), rate ** (n - 2) * (1 - rate)
+    assert estimated_error(change, previous) == pytest.approx(rate**n, rel=1e-12)
+    # The plain test would stop long before: the change is (1 − ρ)/ρ times the error.
+    assert change < estimated_error(change, previous) or rate <= 0.5
+
+
+def test_estimated_error_is_the_change_where_the_iteration_contracts_fast_and_caps_the_rate():
+    assert estimated_error(1e-3, 1e-2) == 1e-3  # ρ = 0.1: the change bounds the error
+    assert estimated_error(1e-3, np.inf) == 1e-3  # no rate yet
+    assert estimated_error(1e-3, 1e-3) == pytest.approx(1e-3 * RATE_MAX / (1 - RATE_MAX))
+    # Newton is tried where the contraction test is far away, though the change is near am_tol.
+    assert remaining_iterations(1.19e-3, 1.31e-3, 1e-3) > 20
+    assert remaining_iterations(1.19e-3, 1.31e-3, 1e-3, contraction=False) < 2
+
+
+def test_contraction_test_does_not_stop_a_creeping_iteration_early(tmp_path):
+    # obtuse-line with plain alternating minimisation: stopped on ‖Δv‖∞ < 1e-3 the body breaks
+    # one load step late (0.52), the crack still creeping when the test holds; converged
+    # (am_tol 1e-4 to 1e-6) it breaks at 0.50. The contraction test at the same am_tol does.
+    scene = load_scene("obtuse-line")
+    times = np.round(np.arange(0.0, 0.561, 0.02), 10)
+    breaks = {}
+    for stop in ("change", "contraction"):
+        parameters, _ = scene.configure(
+            overrides={"nonlinear": "am", "am_stop": stop, "am_max_iter": 20000}
+        )
+        breaks[stop] = run(scene, parameters, times, tmp_path / stop).summary["fracture_time"]
+    assert breaks == {"change": 0.52, "contraction": 0.5}
 
 
 def test_every_nonlinear_solver_has_a_strategy():
