@@ -423,22 +423,19 @@ def remaining_iterations(
     return float(np.log(tol / (change * factor)) / np.log(ratio))
 
 
+def _newton_switch(iteration: AlternatingMinimization, solver: SolverParameters) -> NewtonSwitch:
+    """Return Newton steps around ``iteration``, aimed at the loop's stopping test."""
+    return NewtonSwitch(
+        iteration, solver.newton_switch, solver.am_tol, solver.am_stop == "contraction"
+    )
+
+
 STRATEGIES: dict[str, Callable[[SolverParameters], NonlinearStrategy]] = {
     "am": lambda solver: AlternatingMinimization(),
     "overrelaxed": lambda solver: OverRelaxed(solver.omega),
     "anderson": lambda solver: Anderson(solver.anderson_depth),
-    "newton": lambda solver: NewtonSwitch(
-        AlternatingMinimization(),
-        solver.newton_switch,
-        solver.am_tol,
-        solver.am_stop == "contraction",
-    ),
-    "anderson-newton": lambda solver: NewtonSwitch(
-        Anderson(solver.anderson_depth),
-        solver.newton_switch,
-        solver.am_tol,
-        solver.am_stop == "contraction",
-    ),
+    "newton": lambda solver: _newton_switch(AlternatingMinimization(), solver),
+    "anderson-newton": lambda solver: _newton_switch(Anderson(solver.anderson_depth), solver),
 }
 """The strategy of each name of :data:`ngat.parameters.NONLINEAR_SOLVERS`, made from the
 solver parameters."""
