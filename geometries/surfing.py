@@ -568,11 +568,14 @@ def griffith_toughness(release_rates, tip_x, eps: float, grown: float = 10.0, en
 
 
 def steady_rates(times, tip_x, surface) -> dict[str, float]:
-    """Return the crack tip's speed and the surface energy per unit crack advance.
+    """Return the crack tip's speed, the surface energy per unit advance and the stick–slip.
 
-    Both are least-squares slopes over the given steps (choose them after the transient): the
-    speed d(tip)/dt, and dS/da = (dS/dt) / (d(tip)/dt), which averages out the quantisation of
-    the tip position to the mesh.
+    Speed and toughness are least-squares slopes over the given steps (choose them after the
+    transient): the speed d(tip)/dt, and dS/da = (dS/dt) / (d(tip)/dt), which averages out the
+    quantisation of the tip position to the mesh. ``stick_slip`` is the standard deviation of
+    the tip's advance per step divided by its mean: 0 for a crack that advances the same in
+    every step; a crack that is held and then jumps scatters, and the fitted speed of a short
+    window then depends on where the window ends.
 
     Parameters
     ----------
@@ -580,7 +583,12 @@ def steady_rates(times, tip_x, surface) -> dict[str, float]:
         Load times, crack tip x and surface energy S at the steps of the window.
     """
     speed = np.polyfit(times, tip_x, 1)[0]
-    return {"speed": float(speed), "toughness": float(np.polyfit(times, surface, 1)[0] / speed)}
+    advance = np.diff(tip_x)
+    return {
+        "speed": float(speed),
+        "toughness": float(np.polyfit(times, surface, 1)[0] / speed),
+        "stick_slip": float(np.std(advance) / np.mean(advance)),
+    }
 
 
 scene = make_scene()

@@ -249,6 +249,8 @@ def steady_propagation(
     -------
     dict
         ``speed_ratio`` = tip speed / V, ``toughness_ratio`` = (dS/da) / G_eff,
+        ``stick_slip`` (the scatter of the advance per step, :func:`~ngat.geometries.surfing.
+        steady_rates`),
         ``tip_g_drift`` = relative change over the window of Griffith's G of a sharp crack
         ending at the measured tip (:func:`~ngat.geometries.surfing.sharp_crack_release_rate`),
         ``g_eff``,
@@ -291,6 +293,7 @@ def steady_propagation(
     return {
         "speed_ratio": rates["speed"] / speed,
         "toughness_ratio": rates["toughness"] / g_eff,
+        "stick_slip": rates["stick_slip"],
         "tip_g_drift": tip_g[1] / tip_g[0] - 1,
         "g_eff": g_eff,
         "h": h,
@@ -371,6 +374,7 @@ def main() -> None:
              "j_c_over_g_eff": round(a["j_ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
              "speed_over_V": round(b["speed_ratio"], 4),
              "toughness_over_g_eff": round(b["toughness_ratio"], 4),
+             "stick_slip": round(b["stick_slip"], 3),
              "tip_g_drift": round(b["tip_g_drift"], 4),
              "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
              "eta": args.eta, "am_stop": args.am_stop,

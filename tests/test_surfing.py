@@ -95,6 +95,20 @@ def test_onset_finds_the_break_of_a_two_segment_line():
     assert abs(surfing.onset(a2, tip) - 1.07) < 2e-3
 
 
+def test_steady_rates_of_a_steady_and_of_a_stick_slip_track():
+    times = 0.03 * np.arange(13)
+    steady = 0.5 + 0.012 * np.arange(13)
+    rates = surfing.steady_rates(times, steady, 1.05 * steady)
+    assert rates["speed"] == pytest.approx(0.4)
+    assert rates["toughness"] == pytest.approx(1.05)
+    assert rates["stick_slip"] < 1e-12
+    # Held and jumping: advances of 0.5 and 1.5 V Δt in turn, the same mean speed.
+    jumps = 0.5 + np.r_[0.0, np.cumsum(0.012 * np.resize([0.5, 1.5], 12))]
+    rates = surfing.steady_rates(times, jumps, 1.05 * jumps)
+    assert rates["stick_slip"] == pytest.approx(0.5)
+    assert rates["speed"] == pytest.approx(0.4, rel=0.03)
+
+
 def test_crack_starts_to_grow_at_the_effective_toughness(tmp_path):
     script = griffith_script()
     eps, h_over_eps = script.QUICK["critical"]
