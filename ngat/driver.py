@@ -36,6 +36,7 @@ from ngat.checkpoint import (
 )
 from ngat.crack import check_slits, connects, crack_tips
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
+from ngat.extension import CrackExtension
 from ngat.halfsteps import HalfStepSolvers
 from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
@@ -212,6 +213,11 @@ def _run_locked(
             restore_state(state, half_steps, checkpoint)
         result.state = state
         band = crack_band(scene, parameters)
+        extension = (
+            CrackExtension(parameters.model.eps, scene.slits, band)
+            if solver.crack_extension and scene.slits
+            else None
+        )
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
         for k, t in enumerate(times):
             if k < len(result.records):
@@ -221,7 +227,14 @@ def _run_locked(
             predicted = band.refine(state) if band else 0
             try:
                 step = alternating_minimization(
-                    state, solver, parameters.adaptivity, monitor, band, half_steps, strategy
+                    state,
+                    solver,
+                    parameters.adaptivity,
+                    monitor,
+                    band,
+                    half_steps,
+                    strategy,
+                    extension,
                 )
             except ConvergenceError as error:
                 diagnostics.report("nan", str(error), k, float(t), raise_now=False)
@@ -245,6 +258,7 @@ def _run_locked(
                 fallbacks=step.fallbacks,
                 newton_steps=step.newton_steps,
                 escapes=step.escapes,
+                extensions=step.extensions,
                 curvature_solves=step.curvature_solves,
             )
             record.update(crack_measures(state, scene))

@@ -30,6 +30,7 @@ import numpy as np
 
 from ngat.band import CrackBand
 from ngat.estimators import mu_estimator, nu_estimator
+from ngat.extension import CrackExtension
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import AdaptivityParameters, SolverParameters
 from ngat.refinement import mark, refinable, refine
@@ -88,6 +89,8 @@ class StepResult:
     escapes
         Steps along a direction of negative curvature of I_j (away from a saddle) instead of
         a Newton step.
+    extensions
+        Accepted jumps of running cracks (:class:`ngat.extension.CrackExtension`).
     linear_solves
         Linear systems solved during the step.
     curvature_solves
@@ -115,6 +118,7 @@ class StepResult:
     fallbacks: int = 0
     newton_steps: int = 0
     escapes: int = 0
+    extensions: int = 0
     linear_solves: int = 0
     curvature_solves: int = 0
     cg_iterations: int = 0
@@ -238,6 +242,7 @@ def alternating_minimization(
     band: CrackBand | None = None,
     half_steps: HalfStepSolvers | None = None,
     strategy: NonlinearStrategy | None = None,
+    extension: CrackExtension | None = None,
 ) -> StepResult:
     """Run Algorithm 1 or 2 from the current (u, v), with v = 0 on CR(t_k).
 
@@ -258,6 +263,9 @@ def alternating_minimization(
         The solvers of the half-steps (:mod:`ngat.halfsteps`) and the nonlinear solver
         (:mod:`ngat.strategies`), kept by the caller so that their factorisations serve every
         load step; default new ones as ``solver`` sets them.
+    extension
+        Jumps of running cracks (:class:`ngat.extension.CrackExtension`), tried after each
+        iteration that did not converge, before the strategy's own step.
 
     Returns
     -------
@@ -275,6 +283,8 @@ def alternating_minimization(
     state.v_values[state.crack_set()] = 0.0
     half_steps.start()
     strategy.start(state, half_steps)
+    if extension:
+        extension.start()
     previous, moved = np.inf, 0.0  # the last iteration's change, the strategy's step after it
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
@@ -316,8 +326,12 @@ def alternating_minimization(
             result.converged = True
             result.reason = "converged"
             break
-        before = state.v_values.copy()
         moved = 0.0
+        if extension and extension.advance(state, half_steps, energy):
+            moved = 1.0  # v fell from about 1 to 0 where the crack jumped
+            result.energies.append(state.energies()["total"])
+            continue
+        before = state.v_values.copy()
         if strategy.after_iteration(state, change):
             moved = float(np.max(np.abs(state.v_values - before)))
             result.energies.append(state.energies()["total"])
@@ -329,6 +343,10 @@ def alternating_minimization(
             result.change,
         )
     _record_statistics(result, half_steps, strategy)
+    if extension:
+        result.extensions = extension.jumps
+        result.band_refinements += extension.band_rounds
+        result.refinements += extension.band_rounds
     return result
 
 

@@ -207,6 +207,10 @@ class SolverParameters:
     newton_switch
         Change ‖v^n − v^{n−1}‖_∞ of an alternating-minimisation iteration below which Newton
         steps are tried (``nonlinear="newton"``).
+    crack_extension
+        Let running cracks jump ahead within a load step (:mod:`ngat.extension`): the crack
+        profile is translated along the tip's motion and kept where it lowers I_j. Needs the
+        scene's slits (the tips are those of their cracks).
     bounded_v
         Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.halfsteps.HalfStepSolvers.solve_v`).
     on_problem
@@ -223,6 +227,7 @@ class SolverParameters:
     omega: float = 1.5
     anderson_depth: int = 5
     newton_switch: float = 0.1
+    crack_extension: bool = False
     bounded_v: bool = True
     on_problem: str = "warn"
 
