@@ -95,16 +95,23 @@ class CrackExtension:
         self.jumps = self.rejected = self.band_rounds = 0
 
     def running(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Return (tip, unit direction of motion) of each crack running over the last iterations."""
+        """Return (tip, unit direction of motion) of every crack if all run, else nothing.
+
+        A crack runs if its tip advanced in each of the last :data:`RUN_WINDOW` iterations by
+        at least :data:`RUN_ADVANCE` ε. Cracks jump together or not at all: where several run
+        in one step, their paths depend on how far each has come (two-slits' cracks, which
+        meet, kinked where one jumped alone).
+        """
         if len(self.tips) <= RUN_WINDOW:
             return []
         window = np.array(self.tips[-RUN_WINDOW - 1 :])  # (iterations, slits, 2)
         found = []
         for track in window.transpose(1, 0, 2):
             advance = np.linalg.norm(np.diff(track, axis=0), axis=1)
-            if advance.min() >= RUN_ADVANCE * self.eps:
-                direction = track[-1] - track[0]
-                found.append((track[-1], direction / np.linalg.norm(direction)))
+            if advance.min() < RUN_ADVANCE * self.eps:
+                return []
+            direction = track[-1] - track[0]
+            found.append((track[-1], direction / np.linalg.norm(direction)))
         return found
 
     def path(
@@ -142,13 +149,14 @@ class CrackExtension:
         return tip + c0 * across, tangent / np.linalg.norm(tangent), longest
 
     def planned(self, state: ATState) -> list[tuple[np.ndarray, np.ndarray, float]]:
-        """Return (end point, tangent, jump) of each running crack that may jump now.
+        """Return (end point, tangent, jump) of each crack if all may jump now, else nothing.
 
         The jump is the current one, shortened to what the path's curvature allows
-        (:meth:`path`); a tip does not jump if a damaged vertex (v < ``DAMAGED``) of another
-        crack — another component of the damaged set than the one at the tip — lies within
-        twice the jump plus 3ε of it: where cracks meet, their paths bend towards each other
-        and a straight jump would run past.
+        (:meth:`path`) and to what another crack allows: cracks that meet bend towards each
+        other, and a crack at distance D from a damaged vertex (v < ``DAMAGED``) of another
+        crack (another component of the damaged set) is taken to bend with a radius D/2, so
+        that a straight jump of s leaves its path by s²/D ≤ :data:`DEVIATION` ε. Tips whose
+        jump would be shorter than :data:`MIN_JUMP` ε do not jump, and then no crack does.
         """
         runs = self.running()
         if not runs:
@@ -161,17 +169,19 @@ class CrackExtension:
         for tip, motion in runs:
             fitted = self.path(state, tip, motion)
             if fitted is None:
-                continue
+                return []
             end, tangent, longest = fitted
-            jump = min(self.jump, longest)
-            if jump < MIN_JUMP * self.eps:
-                continue
             distance = np.linalg.norm(coords[indices] - tip, axis=1)
             own = labels[indices[np.argmin(distance)]]
-            near = (labels[indices] != own) & (distance <= 2 * jump + REACH * self.eps)
-            if not near.any():
-                found.append((end, tangent, jump))
-        return found
+            other = distance[labels[indices] != own].min(initial=np.inf)
+            # Near another crack at distance D the path bends with a radius of about D/2.
+            jump = min(self.jump, longest, np.sqrt(DEVIATION * self.eps * other))
+            if jump < MIN_JUMP * self.eps:
+                return []
+            found.append((end, tangent, jump))
+        # One jump for all, the shortest any of them allows.
+        jump = min(jump for _, _, jump in found)
+        return [(end, tangent, jump) for end, tangent, _ in found]
 
     def translated(
         self, state: ATState, v: GridFunction, runs: list[tuple[np.ndarray, np.ndarray, float]]
