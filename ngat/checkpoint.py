@@ -41,6 +41,7 @@ from ngat.output import (
     write_atomic,
     writing,
 )
+from ngat.parameters import with_legacy_values
 from ngat.results import parse_records
 from ngat.state import ATState
 
@@ -221,7 +222,9 @@ def check_identity(
 ) -> None:
     """Raise :class:`OutputError` unless the checkpoint belongs to this scene and parameters."""
     ours = {"scene": scene, "parameters": parameters, "times": times_summary(times)}
-    differ = [key for key in ours if checkpoint.identity.get(key) != ours[key]]
+    theirs = dict(checkpoint.identity)
+    theirs["parameters"] = with_legacy_values(theirs.get("parameters", {}))
+    differ = [key for key in ours if theirs.get(key) != ours[key]]
     if differ:
         raise OutputError(
             f"cannot resume: the checkpoint belongs to a run with another {' and '.join(differ)}; "

@@ -27,6 +27,8 @@ from xml.sax.saxutils import quoteattr
 
 import ngsolve
 
+from ngat.parameters import with_legacy_values
+
 __all__ = [
     "ResultsWriter",
     "vtu_name",
@@ -155,7 +157,7 @@ def check_results_folder(
             f"cannot resume '{folder}': it holds a run of scene '{summary['scene']}', not "
             f"'{scene}'; give the same scene or another folder"
         )
-    theirs = _identity(summary.get("parameters", {}), summary.get("times", {}))
+    theirs = _identity(with_legacy_values(summary.get("parameters", {})), summary.get("times", {}))
     ours = _identity(parameters, times_summary(times))
     differ = [
         f"{key}: {theirs.get(key)} there, {ours.get(key)} here"

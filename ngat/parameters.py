@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -485,3 +486,19 @@ class Parameters:
             for group in self._groups().values()
             for f in dataclasses.fields(group)
         }
+
+
+LEGACY_VALUES: dict[str, Any] = {"am_stop": "change", "crack_extension": False}
+"""What the package did in place of a parameter before it existed: a run folder recorded then
+(``summary.json``, checkpoint) does not name it, and resuming it compares these values."""
+
+
+def with_legacy_values(recorded: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the flat parameters of a recorded run with :data:`LEGACY_VALUES` where it names none.
+
+    Parameters
+    ----------
+    recorded
+        Flat parameters as a run folder stores them (:meth:`Parameters.flat`).
+    """
+    return {**LEGACY_VALUES, **recorded}

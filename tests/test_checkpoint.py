@@ -157,3 +157,23 @@ def test_resume_refuses_another_scene_or_other_parameters(tmp_path, scene_file, 
     assert "nothing to resume" in capsys.readouterr().err
     checkpoint = load_checkpoint(folder)
     assert checkpoint.step == 0 and np.all(checkpoint.fields["v"] <= 1)
+
+
+def test_resume_of_a_run_recorded_before_a_parameter_existed(tmp_path):
+    # A summary without am_stop or crack_extension: the run stopped on the change (the paper)
+    # and had no crack extension, so it resumes with am_stop=change and not with the default.
+    from ngat.output import OutputError, check_results_folder, times_summary
+    from ngat.parameters import Parameters
+
+    times = [0.0, 0.1, 0.2]
+    recorded = Parameters().flat()
+    del recorded["am_stop"], recorded["crack_extension"]
+    summary = {"scene": "s", "status": "running", "parameters": recorded,
+               "times": times_summary(times)}  # fmt: skip
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    now = Parameters().flat()
+    with pytest.raises(OutputError, match="am_stop: change there, contraction here") as error:
+        check_results_folder(tmp_path, "s", now, times, mode="resume")
+    assert "crack_extension" not in str(error.value)
+    legacy = {**now, "am_stop": "change"}
+    assert check_results_folder(tmp_path, "s", legacy, times, mode="resume") == summary
