@@ -120,15 +120,24 @@ def steady_measures(records: list[dict], eps: float) -> dict:
     }
 
 
-METHODS = [*NONLINEAR_SOLVERS, "newton/paper"]
-"""Columns: every solver with the default adaptivity (``band``), and the default solver with
-the paper's Algorithm 2 alone (``adapt=paper``)."""
+METHODS = [*NONLINEAR_SOLVERS, "newton/paper", "newton+extension"]
+"""Columns: every solver with the default adaptivity (``band``), the default solver with the
+paper's Algorithm 2 alone (``adapt=paper``) and with the crack extension
+(``crack_extension=true``, :mod:`ngat.extension`)."""
 
 
 def method_overrides(method: str) -> dict:
-    """Return the parameters of a column: ``solver`` or ``solver/adapt`` (e.g. ``newton/paper``)."""
+    """Return the parameters of a column: ``solver[+extension][/adapt]``.
+
+    Examples: ``newton``, ``newton/paper`` (Algorithm 2 alone), ``newton+extension``.
+    """
     solver, _, adapt = method.partition("/")
-    return {"nonlinear": solver, **({"adapt": adapt} if adapt else {})}
+    solver, _, extension = solver.partition("+")
+    return {
+        "nonlinear": solver,
+        **({"adapt": adapt} if adapt else {}),
+        **({"crack_extension": True} if extension == "extension" else {}),
+    }
 
 
 def cell(method: str, case: str, queue: multiprocessing.Queue, progress) -> None:
@@ -352,7 +361,10 @@ def main() -> None:
         "--resume", action="store_true", help="keep the cells already in stability.csv"
     )
     parser.add_argument(
-        "--methods", nargs="+", default=METHODS, help="solver or solver/adapt (e.g. am/paper)"
+        "--methods",
+        nargs="+",
+        default=METHODS,
+        help="solver[+extension][/adapt] (e.g. am/paper, newton+extension)",
     )
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args()
