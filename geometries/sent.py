@@ -13,6 +13,12 @@ P_j(v²) + η. The default ℓ = 0.0075 mm (ε = 0.00375); ``--quick`` uses ℓ 
 The reaction force on the top edge, ``force_top_y`` (kN per mm of thickness), against t is the
 benchmark's curve; its peak is about 0.7 kN at ℓ = 0.0075 mm in the published computations
 (docs/plane-elasticity.md) and the crack runs straight to the right edge.
+
+The crack runs through the whole ligament (0.5 mm, 133ε) within the one load step after the
+peak, so the scene turns on the crack extension (``crack_extension``, :mod:`ngat.extension`):
+its path is straight by symmetry, which a straight jump follows. Measured side by side
+(docs/plane-elasticity.md): the break step in 43 iterations instead of 447 and the run 4.5×
+faster, with the same peak force and the broken state's energy 0.3 % higher.
 """
 
 from __future__ import annotations
@@ -61,6 +67,7 @@ scene = Scene(
         "gc": GC,
         "eps": LENGTH_SCALE / 2,
         "maxh": 0.05,
+        "crack_extension": True,
     },
     quick={"eps": 0.015 / 2, "band_h": 0.35, "floor": 0.08},
 )
