@@ -215,15 +215,21 @@ REFERENCE = json.loads(
 )
 OBTUSE_BREAK = 0.50
 """obtuse-line's break time with converged alternating minimisation (am_tol 1e−4 to 1e−6)."""
+BROKEN_ENERGY_TOL = 3.0
+"""two-slits: I_j of the broken body at the last load time within this many % of the
+reference's. The broken state is a local minimiser that the step's path decides; the cells of
+``newton`` and ``am`` that break at the right time end within 0.05–2.0 % of the reference."""
 
 
 def judge(row: dict, case: str) -> dict:
     """Score a finished cell against the reference: a converged run can still be wrong.
 
     two-slits cells: the fracture time within the load step at the reference (at least 0.02) of the
-    converged reference (1.39) and E(1.0) within 0.5 % of it; obtuse-line cells: the break
+    converged reference (1.39), E(1.0) within 0.5 % of it and I_j at the last load time (the
+    broken body) within :data:`BROKEN_ENERGY_TOL` % of it; obtuse-line cells: the break
     within one load step of 0.50; ``sent`` and ``sens``: the crack path (:func:`judge_path`).
-    Returns ``fracture_error``, ``energy_error_%`` (where they apply) and ``verdict``:
+    Returns ``fracture_error``, ``energy_error_%``, ``broken_energy_error_%`` (where they
+    apply) and ``verdict``:
     ``right``, ``wrong: …`` or empty for cells that did not finish.
     """
     if row.get("status") not in ("converged", "not converged"):
@@ -258,6 +264,13 @@ def judge(row: dict, case: str) -> dict:
         scores["energy_error_%"] = round(error, 3)
         if abs(error) > 0.5:
             wrong.append(f"E(1.0) {error:+.2f} %")
+    end = round(float(times[-1]), 10)
+    steps = REFERENCE["steps"]
+    if not obtuse and fracture not in ("", None) and end in steps["t"]:
+        error = 100 * (row["total"] / steps["total"][steps["t"].index(end)] - 1)
+        scores["broken_energy_error_%"] = round(error, 2)
+        if abs(error) > BROKEN_ENERGY_TOL:
+            wrong.append(f"broken I_j {error:+.1f} %")
     return {**scores, "verdict": "wrong: " + ", ".join(wrong) if wrong else "right"}
 
 

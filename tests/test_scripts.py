@@ -1,6 +1,7 @@
 """Scripts run in quick mode and write their outputs."""
 
 import csv
+import importlib.util
 import json
 import subprocess
 import sys
@@ -74,3 +75,19 @@ def test_bench_paper_against_the_same_revision(tmp_path):
         assert current[key] is not None and current[key] == against[key]
     assert {r["ngat"] for r in comparison["runs"]["current"]} == {str(ROOT / "ngat")}
     assert "| fracture time |" in (tmp_path / "compare.md").read_text()
+
+
+def test_stability_judges_the_broken_body_against_the_reference():
+    # A two-slits cell that breaks at the reference's time with the right E(1.0) is still
+    # wrong if the broken body's I_j at the last load time is more than 3 % off the reference's.
+    spec = importlib.util.spec_from_file_location("stability", ROOT / "scripts" / "stability.py")
+    stability = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stability)
+    steps = stability.REFERENCE["steps"]
+    e_1, e_end = (steps["total"][steps["t"].index(t)] for t in (1.0, 1.6))
+    row = {"status": "converged", "fracture_time": 1.4, "energy_1.0": e_1, "total": e_end}
+    assert stability.judge(row, "Δt=0.05")["verdict"] == "right"
+    row["total"] = 1.036 * e_end  # the crack extension's broken body on this row
+    judged = stability.judge(row, "Δt=0.05")
+    assert judged["verdict"] == "wrong: broken I_j +3.6 %"
+    assert judged["broken_energy_error_%"] == 3.6
