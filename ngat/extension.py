@@ -93,7 +93,7 @@ class CrackExtension:
         """Begin a load step: forget the tips and the jump size."""
         self.tips: list[np.ndarray] = []
         self.jump = FIRST_JUMP * self.eps
-        self.jumps = self.rejected = self.band_rounds = 0
+        self.jumps = self.band_rounds = 0
 
     def running(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Return (tip, unit direction of motion) of every crack if all run, else nothing.
@@ -255,7 +255,6 @@ class CrackExtension:
             self.jump = min(2 * self.jump, MAX_JUMP * self.eps)
             self.tips.append(np.array(crack_tips(state.arrays, state.v_values, self.slits)))
             return True
-        self.rejected += 1
         self.jump /= 2
         if self.jump < FIRST_JUMP * self.eps:
             self.jump, self.tips = FIRST_JUMP * self.eps, []
