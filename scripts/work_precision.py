@@ -75,6 +75,8 @@ MEASURES = {
 """The error measures each scene has (nothing breaks in surfing; two-slits has no steady run)."""
 PAPER_TOL = 1 / 0.6
 """TOL of ``adapt=paper`` per unit tol_rel: the default tol_rel 0.18 is the paper's TOL 0.3."""
+OUTPUT_EVERY = 10
+"""Fields (VTU) of every tenth load step and the last: the study reads energies.csv only."""
 SURFING_WINDOW = 0.5
 """Surfing: the toughness is fitted over t ≥ this (after the ramp and the first jump)."""
 
@@ -86,13 +88,14 @@ def overrides(method: str, value: float) -> dict:
     at TOL = :data:`PAPER_TOL` · value) or either followed by a nonlinear solver's name.
     """
     kind, *solver = method.split()
+    common = {"output_every": OUTPUT_EVERY}
     nonlinear = {"nonlinear": solver[0]} if solver else {}
     if kind == "adaptive":
-        return {"adapt": "band", "tol_rel": value, **nonlinear}
+        return {"adapt": "band", "tol_rel": value, **nonlinear, **common}
     if kind == "paper":
-        return {"adapt": "paper", "tol": round(PAPER_TOL * value, 6), **nonlinear}
+        return {"adapt": "paper", "tol": round(PAPER_TOL * value, 6), **nonlinear, **common}
     # Uniform meshes coarser than ε are part of the comparison.
-    return {"adapt": "fixed", "maxh": value, "resolve_eps": False}
+    return {"adapt": "fixed", "maxh": value, "resolve_eps": False, **common}
 
 
 def run_case(scene_name: str, method: str, value: float, folder: str, quick: bool) -> dict:

@@ -58,6 +58,9 @@ def test_work_precision_quick(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [entry["measure"] for entry in summary["speedups"]] == ["energy_1.0"]
     assert summary["speedups"][0]["uniform_h"] == 0.2
+    # Fields of every tenth step and the last (the study reads energies.csv only).
+    for folder in filter(Path.is_dir, (tmp_path / "runs").iterdir()):
+        assert len(list(folder.glob("fields/*.vtu"))) == 3  # steps 0, 10 and 15 of 16
 
 
 def test_hausdorff_distance_of_tip_tracks():
