@@ -152,7 +152,10 @@ class Diagnostics:
             (
                 "not-converged",
                 not result.converged,
-                f"stopped at the iteration limit with ‖Δv‖∞ = {result.change:.3g}",
+                f"stopped at the iteration limit ({result.iterations} iterations) with ‖Δv‖∞ = "
+                f"{result.change:.3g}; where a crack runs through the body within one load step "
+                "the iteration moves its tip by a fraction of ε per iteration, more so for small "
+                f"ε: raise the limit (--set am_max_iter={2 * result.iterations})",
             ),
             (
                 "linear-not-converged",

@@ -75,6 +75,8 @@ def test_not_converged(tmp_path):
     assert not result.records[-1]["converged"]
     assert problems(tmp_path / "run") == {"not-converged"}
     assert "not-converged" in result.records[-1]["warnings"]
+    message = result.summary["diagnostics"][0]["message"]
+    assert "(2 iterations)" in message and "--set am_max_iter=4" in message
 
 
 def test_eps_under_resolved(tmp_path):
