@@ -26,7 +26,7 @@ import numpy as np
 from ngsolve import H1, BilinearForm
 
 from ngat.forms import a_form, b_form
-from ngat.linear import AMGConjugateGradient, LaggedCholesky
+from ngat.linear import AMGConjugateGradient, HeldCholesky, LaggedCholesky
 from ngat.operators import LumpedOperators
 from ngat.parameters import SolverParameters
 from ngat.state import ATState
@@ -234,6 +234,8 @@ class HalfStepSolvers:
             if self.linear_solver == "cg-h1amg":
                 self._b_solver = self._refreshed(self._b_solver, "v", inactive)
                 self._v_correction(self._b_solver)
+            elif (free & ~inactive).sum() <= HeldCholesky.MAX_HELD:
+                self._v_correction(HeldCholesky(self._b_solver, inactive))
             else:
                 self._v_correction(LaggedCholesky(self._operators.b_matrix, inactive, 0))
             self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass

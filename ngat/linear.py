@@ -28,7 +28,7 @@ from ngsolve import BilinearForm, BitArray, IntRange, Preconditioner
 from ngsolve.krylovspace import CGSolver
 from ngsolve.la import BaseMatrix, BaseVector, Embedding, SparseMatrixd
 
-__all__ = ["LaggedCholesky", "AMGConjugateGradient"]
+__all__ = ["LaggedCholesky", "HeldCholesky", "AMGConjugateGradient"]
 
 log = logging.getLogger(__name__)
 
@@ -73,12 +73,68 @@ class LaggedCholesky:
             self.cg_iterations += cg.iterations
             if cg.iterations < self.max_cg:
                 return
+        self.refresh()
+        out.data = self.inverse * rhs
+
+    def refresh(self) -> None:
+        """Refactorise with the current values if they changed since the last factorisation."""
         if self.stale:
             self.inverse.Update()
             self.factored_values = self.matrix.AsVector().FV().NumPy().copy()
             self.factorizations += 1
             self.stale = False
-        out.data = self.inverse * rhs
+
+
+class HeldCholesky:
+    """Solve A x = b with a few of a :class:`LaggedCholesky`'s free DOFs held at 0.
+
+    A new free set needs a new sparse Cholesky factorisation, ordering and symbolic analysis
+    included (several times a numeric refactorisation). Where only a few DOFs S of the
+    factorised set F are held (the bounded v-step's active set, usually a handful of vertices
+    next to the crack), the capacitance matrix gives the solution on I = F − S exactly from the
+    factorisation at hand: with y = A_FF⁻¹ b̃ (b on I, 0 on S) and the columns W = A_FF⁻¹ E_S of
+    the held DOFs,
+
+        x = y − W (W_SS)⁻¹ y_S
+
+    satisfies A_II x_I = b_I and x_S = 0 (W_SS, a principal block of the inverse of an SPD
+    matrix, is SPD). Cost: |S| + 1 back-substitutions.
+
+    Parameters
+    ----------
+    base
+        The factorisation of A on F (refactorised first if its values are stale).
+    free
+        The free DOFs I, a subset of ``base.free``.
+    """
+
+    MAX_HELD = 10
+    """Most held DOFs worth |S| back-substitutions instead of a new factorisation."""
+
+    def __init__(self, base: LaggedCholesky, free: np.ndarray):
+        base.refresh()
+        self.base = base
+        self.free = free.copy()
+        self.held = np.flatnonzero(base.free & ~free)
+        self._rhs = base.matrix.CreateColVector()
+        self._out = base.matrix.CreateColVector()
+        columns = []
+        for index in self.held:
+            self._rhs[:] = 0.0
+            self._rhs.FV().NumPy()[index] = 1.0
+            self._out.data = base.inverse * self._rhs
+            columns.append(self._out.FV().NumPy().copy())
+        self.columns = np.array(columns).T.reshape(len(free), len(self.held))
+        self.capacitance = self.columns[self.held]
+
+    def solve(self, rhs: BaseVector, out: BaseVector) -> None:
+        """Set ``out`` to the solution on the free DOFs (0 elsewhere)."""
+        self._rhs.FV().NumPy()[:] = np.where(self.free, rhs.FV().NumPy(), 0.0)
+        self._out.data = self.base.inverse * self._rhs
+        y = self._out.FV().NumPy()
+        if len(self.held):
+            y = y - self.columns @ np.linalg.solve(self.capacitance, y[self.held])
+        out.FV().NumPy()[:] = np.where(self.free, y, 0.0)
 
 
 class AMGConjugateGradient:

@@ -16,7 +16,7 @@ from ngat.driver import run
 from ngat.forms import a_form
 from ngat.geometries import surfing_mode_i
 from ngat.halfsteps import HalfStepSolvers
-from ngat.linear import AMGConjugateGradient
+from ngat.linear import AMGConjugateGradient, HeldCholesky, LaggedCholesky
 from ngat.minimization import StepResult
 from ngat.operators import LumpedOperators
 from ngat.parameters import ParameterError, Parameters
@@ -154,3 +154,28 @@ def test_vector_u_step_by_cg_with_block_h1amg_gives_the_direct_solution(model):
 def test_split_with_cg_h1amg_is_refused():
     with pytest.raises(ParameterError, match="split=voldev"):
         Parameters().replace(model="plane_strain", split="voldev", linear_solver="cg-h1amg")
+
+
+def test_held_cholesky_solves_the_subset_exactly(bounded):
+    """A few DOFs held at 0 by the capacitance matrix: the solution of a new factorisation."""
+    state = bounded["direct"].state
+    operators = LumpedOperators(state)
+    operators.assemble_b()
+    free = ~state.crack_set()
+    base = LaggedCholesky(operators.b_matrix, free, max_cg=0)
+    rng = np.random.default_rng(0)
+    held = rng.choice(np.flatnonzero(free), size=HeldCholesky.MAX_HELD, replace=False)
+    subset = free.copy()
+    subset[held] = False
+    rhs = operators.b_matrix.CreateColVector()
+    rhs.FV().NumPy()[:] = rng.standard_normal(len(free))
+    expected, found = operators.b_matrix.CreateColVector(), operators.b_matrix.CreateColVector()
+    LaggedCholesky(operators.b_matrix, subset, max_cg=0).solve(rhs, expected)
+    HeldCholesky(base, subset).solve(rhs, found)
+    assert np.all(found.FV().NumPy()[~subset] == 0.0)
+    scale = np.abs(expected.FV().NumPy()).max()
+    assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-10 * scale
+    # Nothing held: the base solution itself.
+    LaggedCholesky(operators.b_matrix, free, max_cg=0).solve(rhs, expected)
+    HeldCholesky(base, free).solve(rhs, found)
+    assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-12 * scale
