@@ -6,6 +6,8 @@ keeps the last numeric factorisation as a preconditioner for conjugate gradients
 matrix; when CG needs more than ``max_cg`` iterations, the factorisation is refreshed with
 ``Inverse.Update()`` (same graph and free DOFs: the ordering and symbolic analysis are reused)
 and the system is solved directly. With ``max_cg = 0`` every solve refactorises.
+:class:`HeldCholesky` solves with a few more DOFs held by the factorisation at hand (the bounded
+v-step's active set), where a factorisation of its own would need a new ordering.
 
 :class:`AMGConjugateGradient` is the iterative alternative (``linear_solver="cg-h1amg"``): CG
 preconditioned by NGSolve's algebraic multigrid ``h1amg``, rebuilt for every new matrix. The
