@@ -126,7 +126,7 @@ class HeldCholesky:
             self._rhs.FV().NumPy()[index] = 1.0
             self._out.data = base.inverse * self._rhs
             columns.append(self._out.FV().NumPy().copy())
-        self.columns = np.array(columns).T.reshape(len(free), len(self.held))
+        self.columns = np.column_stack(columns) if columns else np.empty((len(free), 0))
         self.capacitance = self.columns[self.held]
 
     def solve(self, rhs: BaseVector, out: BaseVector) -> None:
