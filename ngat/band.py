@@ -21,6 +21,13 @@ v-step of the alternating minimisation (corrector: a crack that grew into coarse
 during the iteration has them refined, and the iteration goes on on the refined mesh), so no
 converged step has damage in elements wider than the target.
 
+With a ``grading`` g > 0 the band is graded into the body: every element within reach of
+the centres whose diameter exceeds ``band_h · ε + g · (d − BUFFER · ε)`` at distance d is
+refined as well (a size field that grows linearly away from the crack, like a mesh that is
+structured along a known crack path and graded away from it). The elastic field about a crack
+then keeps its accuracy as the crack grows; without it the body far from the band stays as
+coarse as μ leaves it.
+
 The refinement has hysteresis: it fires only when a coarse element comes within ``TRIGGER``
 times those radii (a crack front that has crossed half of the resolved margin), and then
 resolves the whole band. Without it a running crack moves the band's edge a little at every
@@ -130,6 +137,8 @@ class CrackBand:
     trigger
         Fraction of the band's radii inside which a coarse element triggers a refinement
         (1: no hysteresis).
+    grading
+        Growth g of the target diameter per unit distance beyond the band (0: no grading).
     """
 
     def __init__(
@@ -139,11 +148,13 @@ class CrackBand:
         slits: Sequence[Slit],
         h_floor: float,
         trigger: float = TRIGGER,
+        grading: float = 0.0,
     ):
         self.eps = eps
         self.target = max(band_h * eps, 2 * h_floor)
         self.slits = list(slits)
         self.trigger = trigger
+        self.grading = grading
 
     def centres(self, state: ATState) -> tuple[np.ndarray, np.ndarray]:
         """Return the damaged vertices (v < ``DAMAGED``) and the slits' crack tips (of v)."""
@@ -184,6 +195,46 @@ class CrackBand:
         marked[coarse[near]] = True
         return marked
 
+    def graded(
+        self,
+        coords: np.ndarray,
+        elements: np.ndarray,
+        centres: np.ndarray,
+        diameter: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Return the elements wider than ``target + grading · (d − BUFFER · ε)``.
+
+        d is the distance from an element to the nearest centre, measured from its first
+        vertex less its diameter (a lower bound); elements beyond the distance where the
+        allowed size exceeds the widest element are never marked.
+
+        Parameters
+        ----------
+        coords, elements
+            Vertex coordinates and element vertex numbers of the current mesh.
+        centres
+            The damaged vertices and the crack tips (:meth:`centres`), stacked.
+        diameter
+            The elements' diameters, if known (else computed).
+        """
+        marked = np.zeros(len(elements), dtype=bool)
+        if self.grading <= 0 or len(centres) == 0:
+            return marked
+        if diameter is None:
+            diameter = element_diameters(coords, elements)
+        coarse = np.flatnonzero(diameter > self.target)
+        if len(coarse) == 0:
+            return marked
+        width = diameter[coarse]
+        margin = BUFFER * self.eps
+        reach = margin + (width.max() - self.target) / self.grading + width.max()
+        distance, _ = cKDTree(centres).query(
+            coords[elements[coarse, 0]], distance_upper_bound=reach
+        )
+        allowed = self.target + self.grading * np.maximum(0.0, distance - width - margin)
+        marked[coarse] = width > allowed
+        return marked
+
     def triggered(
         self, coords: np.ndarray, elements: np.ndarray, damaged: np.ndarray, tips: np.ndarray
     ) -> bool:
@@ -210,6 +261,7 @@ class CrackBand:
         """Bisect the band until no element in it is wider than the target, if it needs it.
 
         Nothing is done unless a coarse element lies within ``trigger`` times the band's radii
+        (the grading, if any, is refined along with the band)
         (hysteresis, see the module docstring). The centres (damaged vertices, tips) are taken
         once, on the current mesh: bisection only adds vertices between old ones, so the
         damaged set of the prolongated v lies within the band around them; the operators are
@@ -233,12 +285,17 @@ class CrackBand:
             triggered = self.triggered(coords, elements[marked], damaged, centres)
         if not triggered:
             return 0
+        everywhere = np.concatenate([damaged, centres])
         rounds = 0
+        with state.timer("band"):
+            marked |= self.graded(coords, elements, everywhere, arrays.diameter)
         while rounds < MAX_ROUNDS and bisect(state, marked):
             rounds += 1
             with state.timer("band"):
                 coords, elements = mesh_geometry(state.mesh)
-                marked = self.marked(coords, elements, damaged, centres)
+                diameter = element_diameters(coords, elements)
+                marked = self.marked(coords, elements, damaged, centres, diameter)
+                marked |= self.graded(coords, elements, everywhere, diameter)
         if rounds:
             rebuild(state)
             log.debug("crack band: %d rounds, %d elements", rounds, state.arrays.ne)

@@ -107,7 +107,10 @@ def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
     adaptivity, eps = parameters.adaptivity, parameters.model.eps
     if adaptivity.adapt != "band":
         return None
-    return CrackBand(eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps)
+    return CrackBand(
+        eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps,
+        grading=adaptivity.band_grading,
+    )  # fmt: skip
 
 
 def run(

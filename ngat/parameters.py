@@ -291,6 +291,11 @@ class AdaptivityParameters:
     band_h
         Target element diameter in the crack band, in units of ε (``adapt="band"``): with the
         default ε/4 a crack band costs G_eff ≤ 1.065 per unit length (:mod:`ngat.band`).
+    band_grading
+        Growth of the crack band's target diameter per unit distance beyond the band
+        (``adapt="band"``; :mod:`ngat.band`): 0 (the default) leaves the body beyond the band
+        to μ and ν, g > 0 grades it like a mesh structured along the crack path (0.42 is the
+        diameter growth of ``geometries/surfing.py``'s structured mesh).
     floor
         Element floor in units of ε: elements are bisected only while their children stay
         at least ``floor · ε`` wide (:func:`ngat.refinement.refinable`); the default is the
@@ -312,6 +317,7 @@ class AdaptivityParameters:
     theta: float = 0.5
     marking: str = "dorfler"
     band_h: float = 0.25
+    band_grading: float = 0.0
     floor: float = 0.02
     max_refinements: int = 200
     resolve_eps: bool = True
@@ -334,6 +340,10 @@ class AdaptivityParameters:
             raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
         if not self.floor >= 0:
             raise ParameterError(f"floor must be non-negative, got floor={self.floor}")
+        if not 0 <= self.band_grading < math.inf:
+            raise ParameterError(
+                f"band_grading must be a non-negative number, got band_grading={self.band_grading}"
+            )
         if self.resolve_eps:
             self.check_resolution()
         if not self.band_h > 2 * self.floor:

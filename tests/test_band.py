@@ -144,3 +144,31 @@ def test_relative_tolerance_scales_with_the_load_like_the_estimators():
     assert mu_2 / mu_1 == pytest.approx(4.0, rel=1e-9)
     assert tol_2 / tol_1 == pytest.approx(4.0, rel=1e-9)
     assert tolerance(state, adaptivity.__class__(adapt="paper")) == 0.3
+
+
+def test_grading_bounds_the_elements_by_their_distance_from_the_crack():
+    eps, grading = 0.05, 0.42
+    _, state, band = two_slits_state(eps)
+    band.slits = []
+    band.grading = grading
+    # A crack along y = 3 from x = 1 to 5 (as above), resolved with its graded surroundings.
+    for _ in range(12):
+        coords = state.arrays.coords
+        line = (np.abs(coords[:, 1] - 3) < 1e-9 + 0.6 * state.arrays.diameter.max()) & (
+            np.abs(coords[:, 0] - 3) <= 2
+        )
+        state.v_values[:] = np.where(line, 0.0, 1.0)
+        if not band.refine(state):
+            break
+    arrays = state.arrays
+    first = arrays.coords[arrays.elements[:, 0]]
+    along = np.clip(first[:, 0], 1, 5)
+    distance = np.hypot(first[:, 0] - along, first[:, 1] - 3)
+    # Every element obeys the graded size (up to the spacing of the damaged vertices, which
+    # are the centres, against the distance to the line measured here).
+    allowed = band.target + grading * np.maximum(0.0, distance - BUFFER * eps)
+    assert np.all(arrays.diameter <= allowed + band.target)
+    # And the grading is what refined the flanks: without it they stay at the initial size.
+    flank = (distance > 0.5) & (distance < 1.0) & (np.abs(first[:, 0] - 3) < 1.5)
+    assert arrays.diameter[flank].max() < 0.25
+    assert arrays.diameter[flank].max() <= band.target + grading * 1.0 + 1e-12

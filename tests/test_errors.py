@@ -55,6 +55,10 @@ CASES = {
     "crtol 0": (["run", "profile-1d", "--set", "crtol=0"], ["crtol must lie in (0, 1)"]),
     "crtol 1": (["run", "profile-1d", "--set", "crtol=1"], ["0 < crtol < 1"]),
     "tol <= 0": (["run", "profile-1d", "--set", "tol=-0.3"], ["tol must be positive", "tol > 0"]),
+    "band_grading < 0": (
+        ["run", "profile-1d", "--set", "band_grading=-0.1"],
+        ["band_grading must be a non-negative number"],
+    ),
     "times": (["run", "times.py"], ["strictly increasing", "t[2] = 0.2 follows t[1] = 0.2"]),
     "unknown --set": (
         ["run", "profile-1d", "--set", "epsilon=0.1"],
