@@ -30,6 +30,19 @@ def two_slits_state(eps=0.05):
     return scene, state, band
 
 
+def resolve_crack_line(state, band, rounds):
+    """Put a crack along y = 3 from x = 1 to 5 (v = 0 there, 1 elsewhere, on the refined
+    vertices too) and let the band refine until it is resolved or ``rounds`` have passed."""
+    for _ in range(rounds):
+        coords = state.arrays.coords
+        line = (np.abs(coords[:, 1] - 3) < 1e-9 + 0.6 * state.arrays.diameter.max()) & (
+            np.abs(coords[:, 0] - 3) <= 2
+        )
+        state.v_values[:] = np.where(line, 0.0, 1.0)
+        if not band.refine(state):
+            break
+
+
 def test_predictor_resolves_the_slit_tips_and_nothing_far_away():
     eps = 0.05
     scene, state, band = two_slits_state(eps)
@@ -50,14 +63,7 @@ def test_damaged_set_and_its_buffer_are_resolved():
     _, state, band = two_slits_state(eps)
     band.slits = []  # the damaged set alone
     # A crack along y = 3 from x = 1 to 5: v = 0 there, 1 elsewhere (on the refined vertices too).
-    for _ in range(8):
-        coords = state.arrays.coords
-        line = (np.abs(coords[:, 1] - 3) < 1e-9 + 0.6 * state.arrays.diameter.max()) & (
-            np.abs(coords[:, 0] - 3) <= 2
-        )
-        state.v_values[:] = np.where(line, 0.0, 1.0)
-        if not band.refine(state):
-            break
+    resolve_crack_line(state, band, rounds=8)
     arrays = state.arrays
     damaged = arrays.coords[state.v_values < DAMAGED]
     assert len(damaged) > 0
@@ -152,14 +158,7 @@ def test_grading_bounds_the_elements_by_their_distance_from_the_crack():
     band.slits = []
     band.grading = grading
     # A crack along y = 3 from x = 1 to 5 (as above), resolved with its graded surroundings.
-    for _ in range(12):
-        coords = state.arrays.coords
-        line = (np.abs(coords[:, 1] - 3) < 1e-9 + 0.6 * state.arrays.diameter.max()) & (
-            np.abs(coords[:, 0] - 3) <= 2
-        )
-        state.v_values[:] = np.where(line, 0.0, 1.0)
-        if not band.refine(state):
-            break
+    resolve_crack_line(state, band, rounds=12)
     arrays = state.arrays
     first = arrays.coords[arrays.elements[:, 0]]
     along = np.clip(first[:, 0], 1, 5)
