@@ -60,7 +60,7 @@ CASES = {
     "ε under-resolved (fixed h=0.25)":
         ({"adapt": "fixed", "maxh": 0.25, "resolve_eps": False}, QUICK_TIMES),
     # Algorithm 2's TOL: absolute for adapt=paper, relative for adapt=band (tol_rel = 0.6 tol,
-    # the default 0.18 being the paper's 0.3 at t = 1 of its example).
+    # 0.18 being the paper's 0.3 at t = 1 of its example).
     "TOL=1.0": ({"tol": 1.0, "tol_rel": 0.6}, LONG_TIMES),
     "TOL=0.15": ({"tol": 0.15, "tol_rel": 0.09}, QUICK_TIMES),
     "TOL=0.05": ({"tol": 0.05, "tol_rel": 0.03}, QUICK_TIMES),
