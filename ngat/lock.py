@@ -17,6 +17,7 @@ import fcntl
 import logging
 import os
 import threading
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,9 @@ __all__ = ["folder_lock", "FolderInUse", "LOCK_FILE"]
 log = logging.getLogger(__name__)
 
 LOCK_FILE = ".ngat-lock"
+HOLDER_WAIT = 1.0
+"""Seconds a refused process waits for the lock's winner to write its process id (it writes
+it just after it wins the lock, so a process refused in between would read an empty file)."""
 
 
 class FolderInUse(OutputError):
@@ -55,6 +59,16 @@ def _in_use(folder: Path, holder: str) -> FolderInUse:
     )
 
 
+def _holder(fd: int) -> str:
+    """Return the process id written in the lock file ``fd`` ("" if none within HOLDER_WAIT s)."""
+    deadline = time.monotonic() + HOLDER_WAIT
+    while True:
+        written = os.pread(fd, 32, 0).decode(errors="replace")
+        if written.endswith("\n") or time.monotonic() > deadline:
+            return written.strip()
+        time.sleep(0.01)
+
+
 def _acquire(folder: Path) -> int:
     """Lock ``folder/.ngat-lock`` and write this process's id into it; return its descriptor."""
     path = folder / LOCK_FILE
@@ -69,7 +83,7 @@ def _acquire(folder: Path) -> int:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.read(fd, 32).decode(errors="replace").strip()
+            holder = _holder(fd)
             os.close(fd)
             raise _in_use(folder, holder) from None
         except OSError as error:  # a file system without locks (some network or FUSE mounts)

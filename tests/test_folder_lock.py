@@ -197,3 +197,20 @@ def test_atomic_writes_use_temporary_names_of_their_own_and_leave_none_behind(tm
             raise KeyboardInterrupt
     assert path.read_text() == "first"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]
+
+
+def test_a_refused_process_waits_for_the_winner_to_write_its_id(tmp_path):
+    # The winner writes its id just after it wins the lock: a process refused in between
+    # must not report "another process" for want of waiting.
+    from ngat.lock import _holder
+
+    path = tmp_path / LOCK_FILE
+    path.write_text("")
+    fd = os.open(path, os.O_RDONLY)
+    writer = threading.Timer(0.05, lambda: path.write_text("4242\n"))
+    writer.start()
+    try:
+        assert _holder(fd) == "4242"
+    finally:
+        writer.join()
+        os.close(fd)
