@@ -10,9 +10,10 @@ lagged Cholesky factorisations' matrix values (they outlive a load step, see
 steps are the rows of ``energies.csv``, written (and synced) before the checkpoint: a resumed
 run reads them back from there (:func:`restore_energies`).
 
-The mesh is stored as the list of its refinements — the marked elements of every
-``mesh.Refine()`` — plus its vertex coordinates as a check. A resumed run meshes the scene again
-and replays the refinements: Netgen's bisection keeps, per element, the edge to bisect next
+The mesh is stored as the list of its changes — the marked elements of every ``mesh.Refine()``
+and every re-meshed region (:class:`ngat.remesh.Patch`, replayed by :func:`ngat.remesh.splice`
+without Netgen) — plus its vertex coordinates as a check. A resumed run meshes the scene again
+and replays the changes: Netgen's bisection keeps, per element, the edge to bisect next
 (newest-vertex bisection), which a mesh file (``ngmesh.Save``) does not store, so a reloaded
 mesh would be refined differently from then on (and the ``.vol`` file rounds the coordinates in
 the last bit). Replaying gives the identical mesh, numbering and bisection state, which the
@@ -42,6 +43,7 @@ from ngat.output import (
     writing,
 )
 from ngat.parameters import with_legacy_values
+from ngat.remesh import Patch, splice
 from ngat.results import parse_records
 from ngat.state import ATState
 
@@ -85,7 +87,8 @@ class Checkpoint:
     fields
         ``u``, ``v``, ``v_prev``: nodal values.
     refinements
-        Marked element indices of every refinement, in order.
+        The mesh's changes in order: marked element indices of a refinement, or a re-meshed
+        region (:class:`ngat.remesh.Patch`).
     coords
         Vertex coordinates of the mesh (checked after the replay).
     solvers
@@ -96,7 +99,7 @@ class Checkpoint:
     identity: dict[str, Any]
     summary: dict[str, Any]
     fields: dict[str, np.ndarray]
-    refinements: list[np.ndarray]
+    refinements: list
     coords: np.ndarray
     solvers: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -142,7 +145,7 @@ def save_checkpoint(
         "identity": {key: summary[key] for key in ("scene", "parameters", "times")},
         "summary": {key: summary[key] for key in CARRIED if key in summary},
     }
-    marks = state.refinements
+    marks = [c for c in state.refinements if isinstance(c, np.ndarray)]
     arrays = {
         "meta": np.array(json.dumps(meta, default=_plain)),
         "u": state.u_values,
@@ -151,10 +154,63 @@ def save_checkpoint(
         "coords": state.mesh.ngmesh.Coordinates(),
         "marks": np.concatenate(marks) if marks else np.zeros(0, dtype=np.int64),
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
+        **patch_arrays(state.refinements),
         **{f"solver_{key}": value for key, value in half_steps.solver_state().items()},
     }
     with writing(folder), atomic_file(Path(folder) / CHECKPOINT) as f:
         np.savez(f, **arrays)
+
+
+def patch_arrays(changes: Sequence) -> dict[str, np.ndarray]:
+    """Return the re-meshed regions among the mesh's changes as arrays, and where they fall.
+
+    ``patch_after[i]`` is the number of refinements before the i-th patch; each patch's
+    removed elements, points and elements are concatenated with their offsets.
+    """
+    patches = [c for c in changes if isinstance(c, Patch)]
+    if not patches:
+        return {}
+    after = np.cumsum([isinstance(c, np.ndarray) for c in changes])
+    position = [int(after[i]) for i, c in enumerate(changes) if isinstance(c, Patch)]
+    arrays = {
+        "patch_after": np.array(position),
+        "patch_material": np.array([p.material for p in patches]),
+        "patch_disc": np.array([[*p.centre, p.radius] for p in patches]),
+    }
+    for name in ("removed", "points", "elements"):
+        parts = [getattr(p, name) for p in patches]
+        arrays[f"patch_{name}"] = np.concatenate(parts)
+        arrays[f"patch_{name}_offsets"] = np.cumsum([0, *(len(x) for x in parts)])
+    return arrays
+
+
+def with_patches(refinements: list[np.ndarray], data) -> list:
+    """Insert the checkpoint's patches (:func:`patch_arrays`) among its refinements."""
+    if "patch_after" not in data.files:
+        return refinements
+    changes: list = list(refinements)
+
+    def parts(name: str) -> list[np.ndarray]:
+        offsets = data[f"patch_{name}_offsets"]
+        values = data[f"patch_{name}"]
+        return [values[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
+
+    removed, points, elements = parts("removed"), parts("points"), parts("elements")
+    entries = zip(
+        data["patch_after"], data["patch_material"], data["patch_disc"], removed, points,
+        elements, strict=True,
+    )  # fmt: skip
+    for shift, (after, material, disc, *fields) in enumerate(entries):
+        patch = Patch(
+            removed=fields[0].astype(np.int64),
+            points=fields[1].reshape(-1, 2),
+            elements=fields[2].reshape(-1, 3).astype(np.int64),
+            material=int(material),
+            centre=disc[:2],
+            radius=float(disc[2]),
+        )
+        changes.insert(int(after) + shift, patch)
+    return changes
 
 
 def load_checkpoint(folder: Path) -> Checkpoint | None:
@@ -181,12 +237,13 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
                 for key in data.files
                 if key.startswith("solver_")
             }
+            refinements = [marks[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
             return Checkpoint(
                 step=meta["step"],
                 identity=meta["identity"],
                 summary={key: meta["summary"][key] for key in CARRIED if key in meta["summary"]},
                 fields={key: data[key] for key in ("u", "v", "v_prev")},
-                refinements=[marks[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)],
+                refinements=with_patches(refinements, data),
                 coords=data["coords"],
                 solvers=solvers,
             )
@@ -267,8 +324,13 @@ def prepare_resume(
     return checkpoint, records
 
 
-def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
-    """Refine the scene's initial mesh as the interrupted run did; check the coordinates.
+def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> ngsolve.Mesh:
+    """Refine and re-mesh the scene's initial mesh as the interrupted run did; check it.
+
+    Returns
+    -------
+    ngsolve.Mesh
+        The mesh of the checkpoint (a new one if a region was re-meshed).
 
     Raises
     ------
@@ -276,6 +338,9 @@ def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
         If the replayed mesh differs from the checkpoint's (the scene or Netgen changed).
     """
     for marked in checkpoint.refinements:
+        if isinstance(marked, Patch):
+            mesh, _ = splice(mesh, marked)
+            continue
         flags = np.zeros(mesh.ne, dtype=bool)
         flags[marked] = True
         mesh.SetRefinementFlags(flags.tolist())
@@ -286,6 +351,7 @@ def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> None:
             "cannot resume: meshing the scene and replaying its refinements does not give the "
             "checkpoint's mesh (was the scene or Netgen changed?); start afresh with --overwrite"
         )
+    return mesh
 
 
 def restore_state(state: ATState, half_steps: HalfStepSolvers, checkpoint: Checkpoint) -> None:
@@ -293,7 +359,9 @@ def restore_state(state: ATState, half_steps: HalfStepSolvers, checkpoint: Check
     state.u_values[:] = checkpoint.fields["u"]
     state.v_values[:] = checkpoint.fields["v"]
     state.v_prev.vec.FV().NumPy()[:] = checkpoint.fields["v_prev"]
-    state.refinements[:] = [np.asarray(m) for m in checkpoint.refinements]
+    state.refinements[:] = [
+        m if isinstance(m, Patch) else np.asarray(m) for m in checkpoint.refinements
+    ]
     half_steps.restore_solver_state(checkpoint.solvers)
 
 

@@ -42,6 +42,7 @@ from ngat.lock import folder_lock
 from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
 from ngat.output import OutputError, ResultsWriter, vtu_name
 from ngat.parameters import Parameters
+from ngat.remesh import TipRemesher
 from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
@@ -111,6 +112,14 @@ def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
         eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps,
         grading=adaptivity.band_grading,
     )  # fmt: skip
+
+
+def tip_remesher(scene: Scene, parameters: Parameters) -> TipRemesher | None:
+    """Return the re-meshing about crack tips of ``remesh_radius`` > 0 (:mod:`ngat.remesh`)."""
+    adaptivity = parameters.adaptivity
+    if adaptivity.adapt != "band" or adaptivity.remesh_radius == 0 or not scene.slits:
+        return None
+    return TipRemesher(parameters.model.eps, scene.slits, adaptivity.remesh_radius)
 
 
 def run(
@@ -203,7 +212,7 @@ def _run_locked(
         with timer("mesh"):
             mesh = scene.make_mesh(parameters.adaptivity.maxh)
             if checkpoint is not None:
-                replay_refinements(mesh, checkpoint)
+                mesh = replay_refinements(mesh, checkpoint)
         solver = parameters.solver
         state = ATState(mesh, parameters.model, scene.loads, scene.crack, timer)
         # One set of solvers for the run: their factorisations outlive a load step.
@@ -221,12 +230,14 @@ def _run_locked(
             if solver.crack_extension and scene.slits
             else None
         )
+        remesher = tip_remesher(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
         for k, t in enumerate(times):
             if k < len(result.records):
                 continue
             begin = time.perf_counter()
             state.apply_load(float(t))
+            remeshed = remesher.remesh(state) if remesher else 0
             predicted = band.refine(state) if band else 0
             try:
                 step = alternating_minimization(
@@ -250,6 +261,7 @@ def _run_locked(
                 converged=step.converged,
                 refinements=step.refinements + predicted,
                 band_refinements=step.band_refinements + predicted,
+                remeshed=remeshed,
                 mu=float(np.sqrt(estimate(state, "u", crack).sum())),
                 nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),
@@ -277,7 +289,7 @@ def _run_locked(
             fields = {"u": state.u, "v": state.v} if output.writes_fields(k, len(times)) else None
             with signals_held():
                 with timer("output"):
-                    writer.write_step(record, mesh, fields)
+                    writer.write_step(record, state.mesh, fields)
                 summary["timing"] = timer.summary()
                 summary["diagnostics"] = diagnostics.summary()
                 with timer("checkpoint"):

@@ -298,6 +298,11 @@ class AdaptivityParameters:
         (``adapt="band"``; :mod:`ngat.band`): 0 (the default) leaves the body beyond the band
         to μ and ν, g > 0 grades it like a mesh structured along the crack path (0.42 is the
         diameter growth of ``geometries/surfing.py``'s structured mesh).
+    remesh_radius
+        Radius, in units of ε, of the disc about each crack tip that Netgen re-meshes with its
+        own elements of ε before each load step (:mod:`ngat.remesh`; ``adapt="band"``): a
+        crack then runs into Netgen's elements rather than into bisected initial ones. 0 (the
+        default): no re-meshing.
     floor
         Element floor in units of ε: elements are bisected only while their children stay
         at least ``floor · ε`` wide (:func:`ngat.refinement.refinable`); the default is the
@@ -320,6 +325,7 @@ class AdaptivityParameters:
     marking: str = "dorfler"
     band_h: float = 0.25
     band_grading: float = 0.0
+    remesh_radius: float = 0.0
     floor: float = 0.02
     max_refinements: int = 200
     resolve_eps: bool = True
@@ -345,6 +351,11 @@ class AdaptivityParameters:
         if not 0 <= self.band_grading < math.inf:
             raise ParameterError(
                 f"band_grading must be a non-negative number, got band_grading={self.band_grading}"
+            )
+        if not 0 <= self.remesh_radius < math.inf:
+            raise ParameterError(
+                "remesh_radius must be a non-negative number (0: no re-meshing), got "
+                f"remesh_radius={self.remesh_radius}"
             )
         if self.resolve_eps:
             self.check_resolution()
@@ -500,7 +511,11 @@ class Parameters:
         }
 
 
-LEGACY_VALUES: dict[str, Any] = {"am_stop": "change", "crack_extension": False}
+LEGACY_VALUES: dict[str, Any] = {
+    "am_stop": "change",
+    "crack_extension": False,
+    "remesh_radius": 0.0,
+}
 """What the package did in place of a parameter before it existed: a run folder recorded then
 (``summary.json``, checkpoint) does not name it, and resuming it compares these values."""
 

@@ -73,7 +73,6 @@ class ATState:
                 f"(edges) of the mesh (materials: {sorted(self.materials)}, boundaries: "
                 f"{sorted(boundaries)}); name the OCC faces or edges accordingly"
             )
-        self.mesh = mesh
         self.model = model
         self.timer = timer or PhaseTimer()
         self.t = Parameter(0.0)
@@ -84,17 +83,46 @@ class ATState:
         for name, g in loads.items():
             self.load_components[name], self.loads[name] = self._load(name, g(self.t))
         self.load_rates = {name: g.Diff(self.t) for name, g in self.loads.items()}
+        self._set_mesh(mesh)
+        # Every change of the mesh, in order: the marked elements of a mesh.Refine() or a
+        # re-meshed region (ngat.remesh.Patch); a checkpoint replays them.
+        self.refinements: list = []
+        self.v.vec[:] = 1.0
+        self.v_prev.vec[:] = 1.0
+        self.mesh_changed()
+
+    def _set_mesh(self, mesh: ngsolve.Mesh) -> None:
+        """Make the P1 spaces and the fields u, v, v(t_{k−1}) and the iterate on ``mesh``."""
+        self.mesh = mesh
         self.fes = H1(mesh, order=1, autoupdate=True)
         self.fes_u = self.fes if self.elasticity.components == 1 else self.elasticity.space(mesh)
         self.u = GridFunction(self.fes_u, autoupdate=True)
         self.v = GridFunction(self.fes, autoupdate=True)
         self.v_prev = GridFunction(self.fes, autoupdate=True)
         self.v_iter = GridFunction(self.fes, autoupdate=True)
-        # The marked elements of every mesh.Refine(), in order: a checkpoint replays them.
-        self.refinements: list[np.ndarray] = []
-        self.v.vec[:] = 1.0
-        self.v_prev.vec[:] = 1.0
+
+    def replace_mesh(self, mesh: ngsolve.Mesh, values: Mapping[str, np.ndarray]) -> None:
+        """Move to another mesh of the same domain (:mod:`ngat.remesh`).
+
+        Parameters
+        ----------
+        mesh
+            The new mesh, with the same materials and boundary names.
+        values
+            Nodal values on ``mesh`` of ``u``, ``v`` and ``v_prev``; the Dirichlet data g(t_k)
+            is set anew.
+        """
+        self._set_mesh(mesh)
+        for name, array in values.items():
+            getattr(self, name).vec.FV().NumPy()[:] = array
+        self.v_iter.vec.data = self.v.vec
         self.mesh_changed()
+        self.apply_load(self.t.Get())
+
+    @property
+    def patches(self) -> list:
+        """The re-meshed regions among the mesh's changes (:class:`ngat.remesh.Patch`)."""
+        return [change for change in self.refinements if not isinstance(change, np.ndarray)]
 
     # -- set-up per mesh --------------------------------------------------------------------
     def mesh_changed(self) -> None:
@@ -118,6 +146,9 @@ class ATState:
             if not dirichlet.any():
                 raise SceneError("the Dirichlet regions contain no DOFs of the mesh")
             self.dirichlet = dirichlet
+            segments = self.mesh.ngmesh.Elements1D().NumPy()["nodes"][:, :2].astype(np.int64)
+            self.boundary_vertices = np.zeros(arrays.nv, dtype=bool)
+            self.boundary_vertices[segments.ravel() - 1] = True
             # Ω_D of the paper: the Dirichlet faces (μ is 0 on the elements meeting them).
             self.dirichlet_vertices = np.zeros(arrays.nv, dtype=bool)
             for name in self.materials.intersection(self.loads):
