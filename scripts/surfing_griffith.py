@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ngat.cli import parse_settings
 from ngat.driver import run
 from ngat.elasticity import elasticity
 from ngat.geometries import surfing, surfing_mode_i
@@ -341,7 +342,12 @@ def main() -> None:
         help="stopping test of the alternating minimisation (default the package's, "
         "contraction; change: the paper's, which stops a creeping crack early)",
     )  # fmt: skip
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="NAME=VALUE",
+        help="change a parameter of the runs, e.g. --set remesh_radius=10 --set band_h=0.18",
+    )  # fmt: skip
     args = parser.parse_args()
+    settings = parse_settings(args.set)
     cases = [(R / QUICK["steady"][0], 1.0)] if args.quick else STUDY
     if args.cases:
         cases = [tuple(float(v) for v in case.split(":")) for case in args.cases]
@@ -361,6 +367,8 @@ def main() -> None:
         if args.am_stop is not None:
             options["am_stop"] = args.am_stop
             tag += f"_{args.am_stop}"
+        options.update(settings)
+        tag += "".join(f"_{name}{value}" for name, value in settings.items())
         a = critical_amplitude(eps, h, args.out / f"critical_{tag}", **options)
         b = steady_propagation(
             eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
@@ -377,7 +385,7 @@ def main() -> None:
              "stick_slip": round(b["stick_slip"], 3),
              "tip_g_drift": round(b["tip_g_drift"], 4),
              "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
-             "eta": args.eta, "am_stop": args.am_stop,
+             "eta": args.eta, "am_stop": args.am_stop, **settings,
              "steps": args.steps, "skip": args.skip}
         )  # fmt: skip
         print(rows[-1], flush=True)
