@@ -308,7 +308,6 @@ class TipRemesher:
         self.eps = eps
         self.slits = slits
         self.radius = radius * eps
-        self.patches = 0
 
     def _native(self, state: ATState, centroid: np.ndarray) -> np.ndarray:
         """Return the elements inside a disc that an earlier re-meshing made (less a margin)."""
@@ -334,12 +333,8 @@ class TipRemesher:
         int
             The number of regions re-meshed.
         """
-        count = 0
-        for tip in crack_tips(state.arrays, state.v_values, self.slits):
-            if self._remesh_at(state, np.asarray(tip)):
-                count += 1
-        self.patches += count
-        return count
+        tips = crack_tips(state.arrays, state.v_values, self.slits)
+        return sum(self._remesh_at(state, np.asarray(tip)) for tip in tips)
 
     def _remesh_at(self, state: ATState, tip: np.ndarray) -> bool:
         """Re-mesh the disc about one tip if it needs it; return whether the mesh changed."""
