@@ -26,7 +26,9 @@ the centres whose diameter exceeds ``band_h · ε + g · (d − BUFFER · ε)`` 
 refined as well (a size field that grows linearly away from the crack, like a mesh that is
 structured along a known crack path and graded away from it). The elastic field about a crack
 then keeps its accuracy as the crack grows; without it the body far from the band stays as
-coarse as μ leaves it.
+coarse as μ leaves it. The grading starts once a slit's crack runs (has grown
+:data:`ngat.crack.GROWN` · ε): about a slit tip that has not cracked μ grades the mesh towards
+the singularity more finely, and a grading there only moves where μ stops refining.
 
 The refinement has hysteresis: it fires only when a coarse element comes within ``TRIGGER``
 times those radii (a crack front that has crossed half of the resolved margin), and then
@@ -42,7 +44,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ngat.crack import Slit, crack_tips
+from ngat.crack import GROWN, Slit, crack_tips, grown
 from ngat.forms import element_diameters
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
@@ -163,6 +165,15 @@ class CrackBand:
         if not self.slits:
             return damaged, np.empty((0, 2))
         return damaged, np.array(crack_tips(arrays, v, self.slits))
+
+    def running(self, tips: np.ndarray) -> bool:
+        """Return whether the band is graded: a crack runs (without slits: always).
+
+        A crack runs once it has grown :data:`ngat.crack.GROWN` · ε from its slit. A slit tip
+        that has not cracked yet is left to μ, which grades the mesh towards its singularity
+        more finely than the band's grading would.
+        """
+        return not self.slits or bool(grown(tips, self.slits, GROWN * self.eps).any())
 
     def marked(
         self,
@@ -285,7 +296,7 @@ class CrackBand:
             triggered = self.triggered(coords, elements[marked], damaged, centres)
         if not triggered:
             return 0
-        everywhere = np.concatenate([damaged, centres])
+        everywhere = np.concatenate([damaged, centres]) if self.running(centres) else centres[:0]
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)

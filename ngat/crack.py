@@ -30,6 +30,9 @@ from ngat.state import SceneError
 __all__ = ["Slit", "mesh_edges", "components", "crack_tips", "connects", "check_slits"]
 
 Slit = tuple[tuple[float, float], tuple[float, float]]
+GROWN = 1.0
+"""Growth from its slit's tip, in units of ε, from which a crack counts as running
+(:func:`grown`): the crack band is graded and the tip re-meshed only about running cracks."""
 """A slit as a segment ``((x_mouth, y_mouth), (x_tip, y_tip))``."""
 
 
@@ -56,6 +59,29 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     )
     _, labels = connected_components(graph, directed=False)
     return np.where(mask, labels, -1)
+
+
+def grown(tips: Sequence[tuple[float, float]], slits: Sequence[Slit], length: float) -> np.ndarray:
+    """Return, per slit, whether its crack's tip lies ``length`` or farther from the slit's tip.
+
+    Parameters
+    ----------
+    tips
+        One tip per slit (:func:`crack_tips`).
+    slits
+        One segment ``((x_mouth, y_mouth), (x_tip, y_tip))`` per slit.
+    length
+        Growth from which a crack counts as grown.
+
+    Returns
+    -------
+    np.ndarray
+        (len(slits),) boolean.
+    """
+    if not slits:
+        return np.zeros(0, dtype=bool)
+    slit_tips = np.array([tip for _, tip in slits], dtype=float)
+    return np.linalg.norm(np.asarray(tips, dtype=float) - slit_tips, axis=1) >= length
 
 
 def _distance_to_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

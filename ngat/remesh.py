@@ -7,12 +7,12 @@ of a lumped crack depends on its direction relative to them. Measured on ``surfi
 speed, Netgen's own elements of ε along the same path (the same crack band bisected on them)
 let it run at 0.98. Adaptivity cannot know the path in advance, so :class:`TipRemesher`
 re-meshes it as the crack comes: before a load step, the elements within ``radius · ε`` of each
-crack tip (:func:`ngat.crack.crack_tips`) that no earlier re-meshing made are replaced by a
-Netgen mesh of size ε of the region they cover (``netgen.geom2d``, the region's boundary edges
-kept), so the rest of the mesh stays exactly as it was. Kept are the elements that touch the
-crack (v < :data:`ngat.band.DAMAGED` now or at the previous step), the boundary (a slit's two
-faces would close in ``netgen.geom2d``) or a Dirichlet region: the region is undamaged body,
-where u and v are smooth.
+running crack tip (:func:`ngat.crack.crack_tips`, :func:`ngat.crack.grown`) that no earlier
+re-meshing made are replaced by a Netgen mesh of size ε of the region they cover
+(``netgen.geom2d``, the region's boundary edges kept), so the rest of the mesh stays exactly as
+it was. Kept are the elements that touch the crack (v < :data:`ngat.band.DAMAGED` now or at the
+previous step), the boundary (a slit's two faces would close in ``netgen.geom2d``) or a
+Dirichlet region: the region is undamaged body, where u and v are smooth.
 
 Before meshing, the region's elements are bisected until their edges are at most
 :data:`EDGE_FRACTION` · ε, so Netgen puts no point on the region's boundary (a boundary that
@@ -36,7 +36,7 @@ from netgen.geom2d import SplineGeometry
 from scipy.spatial import cKDTree
 
 from ngat.band import DAMAGED, mesh_geometry
-from ngat.crack import Slit, crack_tips
+from ngat.crack import GROWN, Slit, crack_tips, grown
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
 
@@ -326,15 +326,21 @@ class TipRemesher:
         return allowed & ~self._native(state, arrays.coords[arrays.elements].mean(axis=1))
 
     def remesh(self, state: ATState) -> int:
-        """Re-mesh about every tip whose disc holds elements no re-meshing made.
+        """Re-mesh about every running crack tip whose disc holds elements no re-meshing made.
+
+        A tip runs once it has grown :data:`ngat.crack.GROWN` · ε from its slit. A slit tip
+        that has not cracked yet keeps the graded mesh the estimators give its singularity:
+        Netgen's elements of ε there would reset the bisection levels that the element floor
+        counts.
 
         Returns
         -------
         int
             The number of regions re-meshed.
         """
-        tips = crack_tips(state.arrays, state.v_values, self.slits)
-        return sum(self._remesh_at(state, np.asarray(tip)) for tip in tips)
+        tips = np.asarray(crack_tips(state.arrays, state.v_values, self.slits))
+        running = grown(tips, self.slits, GROWN * self.eps)
+        return sum(self._remesh_at(state, tip) for tip in tips[running])
 
     def _remesh_at(self, state: ATState, tip: np.ndarray) -> bool:
         """Re-mesh the disc about one tip if it needs it; return whether the mesh changed."""

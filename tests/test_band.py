@@ -171,3 +171,21 @@ def test_grading_bounds_the_elements_by_their_distance_from_the_crack():
     flank = (distance > 0.5) & (distance < 1.0) & (np.abs(first[:, 0] - 3) < 1.5)
     assert arrays.diameter[flank].max() < 0.25
     assert arrays.diameter[flank].max() <= band.target + grading * 1.0 + 1e-12
+
+
+def test_the_band_is_graded_only_about_a_running_crack():
+    # About a slit tip that has not cracked, μ grades the mesh towards the singularity; the
+    # band's grading starts once a crack has grown ε from its slit.
+    eps = 0.05
+    _, plain, band = two_slits_state(eps)
+    band.refine(plain)
+    _, graded, band = two_slits_state(eps)
+    band.grading = 0.42
+    band.refine(graded)
+    assert graded.mesh.ne == plain.mesh.ne
+    tips = np.array([[2.0, 2.0], [4.0, 4.0]])
+    assert not band.running(tips)
+    tips[0, 1] += 1.01 * eps
+    assert band.running(tips)
+    band.slits = []
+    assert band.running(np.empty((0, 2)))

@@ -93,6 +93,18 @@ def test_the_disc_ahead_of_the_tip_gets_netgen_elements_of_eps_and_the_rest_is_k
     assert remesher.remesh(state) == 0
 
 
+def test_a_slit_tip_that_has_not_cracked_keeps_its_mesh():
+    # Before its crack grows, a slit tip keeps the graded mesh the estimators give its
+    # singularity (Netgen's ε there would reset the bisection levels the element floor counts).
+    scene, state = surfing_state()
+    coords = state.arrays.coords
+    state.v_values[:] = smooth(coords)
+    state.v_prev.vec.data = state.v.vec
+    elements = state.mesh.ne
+    assert TipRemesher(EPS, scene.slits, radius=10.0).remesh(state) == 0
+    assert state.mesh.ne == elements and not state.patches
+
+
 def test_a_divided_boundary_edge_splits_the_element_outside_it():
     """Next to much smaller elements Netgen divides the region's boundary; the outside
     element takes the new points through a fan, so no edge hangs."""
