@@ -362,10 +362,10 @@ class AdaptivityParameters:
             )
         if self.resolve_eps:
             self.check_resolution()
-        if not self.band_h > 2 * self.floor:
+        if self.adapt == "band" and not self.band_h > 2 * self.floor:
             raise ParameterError(
                 f"band_h must exceed twice the floor, got band_h={self.band_h}, "
-                f"floor={self.floor}: the band cannot be refined below the floor"
+                f"floor={self.floor}: the band cannot be refined below the floor (adapt=band)"
             )
         if not self.max_refinements >= 0:
             raise ParameterError(

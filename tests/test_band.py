@@ -110,6 +110,7 @@ def test_a_running_crack_is_resolved_at_every_iteration_with_fewer_refinements(
 def test_band_parameters_are_checked():
     with pytest.raises(ParameterError, match="band_h"):
         Parameters().replace(band_h=0.01, floor=0.02)
+    Parameters().replace(adapt="paper", band_h=0.01, floor=0.02)  # no band: no conflict
     with pytest.raises(ParameterError, match="adapt must be one of band"):
         Parameters().replace(adapt="everywhere")
     assert Parameters().adaptivity.adapt == "band"
