@@ -296,7 +296,8 @@ class CrackBand:
             triggered = self.triggered(coords, elements[marked], damaged, centres)
         if not triggered:
             return 0
-        everywhere = np.concatenate([damaged, centres]) if self.running(centres) else centres[:0]
+        graded = self.running(centres)
+        everywhere = np.concatenate([damaged, centres]) if graded else np.empty((0, 2))
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)

@@ -294,7 +294,8 @@ class AdaptivityParameters:
         Target element diameter in the crack band, in units of ε (``adapt="band"``): a band of
         width h costs G_eff ≈ 1 + h/(4ε) per unit length (:mod:`ngat.band`); with the default
         0.18, the grading and the re-meshing a crack runs within 2 % of its speed on
-        ``surfing`` from a coarse unstructured mesh (0.25: 4 % slow; ``docs/adaptivity.md``).
+        ``surfing`` from a coarse unstructured mesh (0.25 with the re-meshing and no grading:
+        0.963 V; ``docs/adaptivity.md``, items 12 and 13).
     band_grading
         Growth of the crack band's target diameter per unit distance beyond the band, about
         running cracks (``adapt="band"``; :mod:`ngat.band`): the default 0.42 grades it like a
