@@ -142,15 +142,33 @@ def run_with_progress(plan: RunPlan, args: argparse.Namespace, console: Console)
             plan.scene.name, total=len(plan.times), completed=plan.done, info=""
         )
 
+        iterations = 0
+
         def on_step(record: dict) -> None:
+            nonlocal iterations
+            iterations = 0
             info = (
                 f"t={record['t']:.3f} elements={record['elements']} "
                 f"iterations={record['am_iterations']}"
             )
             progress.update(task, advance=1, info=info)
 
+        def on_half_step(stage: str, state) -> None:
+            """Show the step under way: its time, iterations so far and elements."""
+            nonlocal iterations
+            if stage == "v":
+                iterations += 1
+                info = f"t={state.t.Get():.3f} elements={state.arrays.ne} iteration {iterations}"
+                progress.update(task, info=info)
+
         return run(
-            plan.scene, plan.parameters, plan.times, plan.folder, on_step, resume=plan.resume
+            plan.scene,
+            plan.parameters,
+            plan.times,
+            plan.folder,
+            on_step,
+            on_half_step,
+            resume=plan.resume,
         )
 
 

@@ -146,7 +146,8 @@ def run(
     on_step
         Called with each step's record (progress display).
     monitor
-        Called after every half-step of the alternating minimisation (tests, diagnostics).
+        Called after every half-step of the alternating minimisation (tests, diagnostics, the
+        progress display of ``ngat run``).
     resume
         Continue the interrupted run in ``folder`` from its checkpoint (same scene, parameters
         and times, else :class:`~ngat.output.OutputError`); the result is the same as that of

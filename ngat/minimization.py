@@ -51,6 +51,10 @@ HalfStepMonitor = Callable[[str, ATState], None]
 
 ROUND_OFF_TOL = 1e-6
 """Smallest TOL of the relative form: estimators of fields that are round-off are not refined."""
+PROGRESS_EVERY = 50
+"""Iterations between the progress lines of one load step (log level INFO): a step in which a
+crack runs through the body can take hundreds of iterations and tens of minutes, and a log or
+console without a line for that long cannot be told from a hung run."""
 
 
 class ConvergenceError(RuntimeError):
@@ -320,6 +324,8 @@ def alternating_minimization(
             )
         error = _stopping_error(change, previous, moved, solver.am_stop)
         previous = change
+        if result.iterations % PROGRESS_EVERY == 0:
+            _log_progress(state, result)
         if error < solver.am_tol and not band_rounds:
             if adaptivity.adapt == "after" and _refine_after(state, adaptivity, result):
                 continue
@@ -348,6 +354,14 @@ def alternating_minimization(
         result.band_refinements += extension.band_rounds
         result.refinements += extension.band_rounds
     return result
+
+
+def _log_progress(state: ATState, result: StepResult) -> None:
+    """Log where a long load step stands: iteration, ‖v^n − v^{n−1}‖_∞, I_j, elements."""
+    log.info(
+        "t=%g: iteration %d, ‖Δv‖∞ = %.3g, total %.6g, %d elements",
+        state.t.Get(), result.iterations, result.change, result.energies[-1], state.arrays.ne,
+    )  # fmt: skip
 
 
 def _record_statistics(

@@ -1,9 +1,12 @@
 """The one-call Python API: ``ngat.run`` and ``ngat.load_results``."""
 
+import logging
+
 import numpy as np
 import pytest
 
 import ngat
+from ngat import minimization
 from ngat.output import OutputError
 from ngat.parameters import ParameterError
 
@@ -86,3 +89,15 @@ def test_ngat_run_is_the_api_and_ngat_driver_run_the_loop():
 
     assert ngat.run is ngat.experiment.run
     assert ngat.driver.run is not ngat.run
+
+
+def test_a_long_load_step_logs_where_it_stands(tiny_run, tmp_path, caplog, monkeypatch):
+    monkeypatch.setattr(minimization, "PROGRESS_EVERY", 2)
+    scene, parameters = tiny_run
+    with caplog.at_level(logging.INFO, logger="ngat.minimization"):
+        result = ngat.run(scene, out=tmp_path / "r", plots=False, **parameters)
+    lines = [r.getMessage() for r in caplog.records if r.name == "ngat.minimization"]
+    assert len(lines) == sum(r["am_iterations"] // 2 for r in result.records) > 0
+    first = next(r for r in result.records if r["am_iterations"] >= 2)
+    assert lines[0].startswith(f"t={first['t']:g}: iteration 2, ‖Δv‖∞ = ")
+    assert lines[0].endswith(" elements")
