@@ -18,8 +18,9 @@ on each triangle. Units: lengths in the scene's unit L, E and W in units of forc
 area, plane problems per unit thickness), G_c in energy per length of crack (force/L).
 
 A plane model may split W = W⁺ + W⁻ and degrade only W⁺ (``split=voldev``,
-:class:`VolumetricDeviatoricSplit`): I_j then has (P_j(v²) + η) W⁺ + W⁻ in place of
-(P_j(v²) + η) W, and every method below has its split counterpart (``degraded_density``,
+:class:`VolumetricDeviatoricSplit`, or ``split=spectral``, :class:`SpectralSplit`): I_j then
+has (P_j(v²) + η) W⁺ + W⁻ in place of (P_j(v²) + η) W, and every method below has its split
+counterpart (``degraded_density``,
 ``intact_density``, ``fluxes``, ``parts`` and ``weights``); without a split they return W, 0 and
 the one element matrix.
 
@@ -42,6 +43,7 @@ __all__ = [
     "AntiPlane",
     "PlaneElasticity",
     "VolumetricDeviatoricSplit",
+    "SpectralSplit",
     "lame",
     "elasticity",
 ]
@@ -106,6 +108,9 @@ class Elasticity:
 
     # -- the energy split: W = W⁺ + W⁻, only W⁺ degraded (none by default) -------------------
     split = False
+    piecewise_quadratic = True
+    """Whether the u-step's energy is quadratic on each piece of a finite pattern
+    (:meth:`tension`): then the semismooth Newton u-step ends when a step keeps the pattern."""
 
     def degraded_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
         """Return W⁺(u), the part of W that v degrades (all of W without a split)."""
@@ -131,7 +136,7 @@ class Elasticity:
         return [c]
 
     def tension(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray | None:
-        """Return the elements whose W⁺ holds the volumetric part; ``None`` without a split."""
+        """Return the split's pattern per element (e.g. tr ε ≥ 0); ``None`` without a split."""
         return None
 
     def degraded_form(self, u) -> ngsolve.CoefficientFunction:
@@ -333,6 +338,152 @@ class VolumetricDeviatoricSplit(PlaneElasticity):
         return self.bulk / 2 * IfPos(trace, 0, trace * trace)
 
 
+class SpectralSplit(PlaneElasticity):
+    """W⁺ = (λ/2)⟨tr ε⟩₊² + μ ε₊:ε₊, W⁻ = W − W⁺ (Miehe, Hofacker and Welschinger 2010).
+
+    ε₊ = Σᵢ ⟨εᵢ⟩₊ nᵢ ⊗ nᵢ is the tensile part of the strain in its eigenbasis: compression along
+    a principal direction keeps its energy, so a sheared body keeps half of its shear energy
+    (pure shear ε = γ(e₁ ⊗ e₂ + e₂ ⊗ e₁): W⁺ = W⁻ = μγ²), where the volumetric–deviatoric
+    split degrades all of it. Plane strain only: ε_zz = 0 is then the third eigenvalue.
+
+    In the invariants p = tr ε/2, q = (ε_xx − ε_yy)/2, r = ε_xy the eigenvalues are p ± ρ,
+    ρ = (q² + r²)^{1/2}, and W⁺(p, q, r) = (λ/2)⟨2p⟩₊² + μ(⟨p + ρ⟩₊² + ⟨p − ρ⟩₊²) is convex, C¹
+    and homogeneous of degree 2, so its Hessian H⁺ satisfies H⁺ (p, q, r) = ∇W⁺ (Euler). With
+    P1 elements p, q, r are constant per element and linear in the element's DOFs, p = b_p·u_T
+    (likewise q, r), so the u-step's element matrix is |T| Σ_{kl} (c_T H⁺_kl + H⁻_kl) b_k b_lᵀ/2:
+    six fixed parts b_k b_lᵀ (:meth:`parts`) weighted by the Hessian's entries (:meth:`weights`),
+    and A(u) u is the gradient of the u-step's energy. Unlike the volumetric–deviatoric split,
+    H⁺ turns with the eigenvectors, so the energy is not quadratic on finitely many pieces: the
+    semismooth Newton u-step runs until its step is small (:attr:`piecewise_quadratic`).
+
+    Parameters
+    ----------
+    lam, mu
+        Lamé constants λ and μ.
+    """
+
+    split = True
+    piecewise_quadratic = False
+    PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    """The entries (k, l) of the symmetric 3 × 3 Hessian in (p, q, r), one part each."""
+
+    @staticmethod
+    def invariants(gradient: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Return p = tr ε/2, q = (ε_xx − ε_yy)/2, r = ε_xy and ρ = (q² + r²)^{1/2}."""
+        p = (gradient[:, 0, 0] + gradient[:, 1, 1]) / 2
+        q = (gradient[:, 0, 0] - gradient[:, 1, 1]) / 2
+        r = (gradient[:, 0, 1] + gradient[:, 1, 0]) / 2
+        return p, q, r, np.hypot(q, r)
+
+    def _plus(self, gradient: np.ndarray) -> np.ndarray:
+        p, _, _, rho = self.invariants(gradient)
+        positive = np.maximum
+        return self.lam / 2 * positive(2 * p, 0.0) ** 2 + self.mu * (
+            positive(p + rho, 0.0) ** 2 + positive(p - rho, 0.0) ** 2
+        )
+
+    def degraded_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return W⁺ = (λ/2)⟨tr ε⟩₊² + μ(⟨ε₁⟩₊² + ⟨ε₂⟩₊²)."""
+        return self._plus(self.gradient(arrays, u))
+
+    def intact_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return W⁻ = W − W⁺ = (λ/2)⟨tr ε⟩₋² + μ(⟨ε₁⟩₋² + ⟨ε₂⟩₋²)."""
+        p, _, _, rho = self.invariants(self.gradient(arrays, u))
+        negative = np.minimum
+        return self.lam / 2 * negative(2 * p, 0.0) ** 2 + self.mu * (
+            negative(p + rho, 0.0) ** 2 + negative(p - rho, 0.0) ** 2
+        )
+
+    def fluxes(self, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return s⁺ = (λ/2)⟨tr ε⟩₊ I + μ ε₊ and s⁻ = s − s⁺.
+
+        ε₊ = ⟨p + ρ⟩₊ (I + N)/2 + ⟨p − ρ⟩₊ (I − N)/2 with N = [[q, r], [r, −q]]/ρ, the
+        difference of the two eigenprojections (where ρ = 0 both coefficients agree and N
+        drops out).
+        """
+        p, q, r, rho = self.invariants(gradient)
+        safe = np.where(rho > 0, rho, 1.0)
+        n = np.stack([np.stack([q, r], -1), np.stack([r, -q], -1)], -2) / safe[:, None, None]
+        big, small = np.maximum(p + rho, 0.0), np.maximum(p - rho, 0.0)
+        eye = np.eye(2)
+        tensile = ((big + small) / 2)[:, None, None] * eye + ((big - small) / 2)[:, None, None] * n
+        plus = self.lam / 2 * np.maximum(2 * p, 0.0)[:, None, None] * eye + self.mu * tensile
+        return plus, self.flux(gradient) - plus
+
+    def _directions(self, arrays: MeshArrays) -> list[np.ndarray]:
+        """Return b_p, b_q, b_r: (ne, 6) rows with p = b_p·u_T (DOFs of :meth:`element_dofs`)."""
+        g = arrays.grad_phi  # (ne, 3, 2)
+        gx, gy = g[:, :, 0], g[:, :, 1]
+        return [
+            np.hstack([gx, gy]) / 2,
+            np.hstack([gx, -gy]) / 2,
+            np.hstack([gy, gx]) / 2,
+        ]
+
+    def parts(self, arrays: MeshArrays) -> list[np.ndarray]:
+        """Return |T| b_k b_kᵀ and |T| (b_k b_lᵀ + b_l b_kᵀ) for the pairs of :data:`PAIRS`."""
+        b = self._directions(arrays)
+        area = arrays.area[:, None, None]
+        parts = []
+        for i, j in self.PAIRS:
+            outer = np.einsum("ei,ej->eij", b[i], b[j])
+            parts.append(area * (outer if i == j else outer + outer.transpose(0, 2, 1)))
+        return parts
+
+    def hessians(self, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the Hessians of W⁺ and of W in (p, q, r), each (ne, 3, 3)."""
+        p, q, r, rho = self.invariants(gradient)
+        lam, mu = self.lam, self.mu
+        up, down = (p + rho > 0).astype(float), (p - rho > 0).astype(float)
+        f_pp = 2 * mu * (up + down)
+        f_prho = 2 * mu * (up - down)
+        # F_ρ/ρ, with its limit 4μ H(p) at ρ = 0 (equal eigenvalues)
+        quotient = np.where(
+            rho > 0,
+            2 * mu * (np.maximum(p + rho, 0) - np.maximum(p - rho, 0)) / np.where(rho > 0, rho, 1),
+            4 * mu * (p > 0),
+        )
+        nq = np.where(rho > 0, q / np.where(rho > 0, rho, 1), 1.0)
+        nr = np.where(rho > 0, r / np.where(rho > 0, rho, 1), 0.0)
+        plus = np.empty((len(p), 3, 3))
+        plus[:, 0, 0] = 4 * lam * (p > 0) + f_pp
+        plus[:, 0, 1] = plus[:, 1, 0] = f_prho * nq
+        plus[:, 0, 2] = plus[:, 2, 0] = f_prho * nr
+        plus[:, 1, 1] = f_pp * nq**2 + quotient * nr**2
+        plus[:, 2, 2] = f_pp * nr**2 + quotient * nq**2
+        plus[:, 1, 2] = plus[:, 2, 1] = (f_pp - quotient) * nq * nr
+        whole = np.zeros_like(plus)
+        whole[:, 0, 0] = 4 * (lam + mu)
+        whole[:, 1, 1] = whole[:, 2, 2] = 4 * mu
+        return plus, whole
+
+    def weights(self, arrays: MeshArrays, u: np.ndarray, c: np.ndarray) -> list[np.ndarray]:
+        """Return (c H⁺_kl + H⁻_kl)/2 for the pairs of :data:`PAIRS` (half the Hessian)."""
+        plus, whole = self.hessians(self.gradient(arrays, u))
+        total = (c[:, None, None] - 1.0) * plus + whole
+        return [total[:, i, j] / 2 for i, j in self.PAIRS]
+
+    def tension(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
+        """Return the signs of tr ε and of the two eigenvalues, (ne, 3)."""
+        p, _, _, rho = self.invariants(self.gradient(arrays, u))
+        return np.stack([p > 0, p + rho > 0, p - rho > 0], axis=1)
+
+    def degraded_form(self, u) -> ngsolve.CoefficientFunction:
+        """Return W⁺(u) as a CoefficientFunction (eigenvalues p ± ρ in closed form)."""
+        return self._form(u, lambda a: IfPos(a, a * a, 0))
+
+    def intact_form(self, u) -> ngsolve.CoefficientFunction:
+        """Return W⁻(u) as a CoefficientFunction."""
+        return self._form(u, lambda a: IfPos(a, 0, a * a))
+
+    def _form(self, u, square) -> ngsolve.CoefficientFunction:
+        strain = Sym(grad(u))
+        p = Trace(strain) / 2
+        q, r = (strain[0, 0] - strain[1, 1]) / 2, strain[0, 1]
+        rho = ngsolve.sqrt(q * q + r * r)
+        return self.lam / 2 * square(2 * p) + self.mu * (square(p + rho) + square(p - rho))
+
+
 def lame(young: float, poisson: float) -> tuple[float, float]:
     """Return the Lamé constants (λ, μ) of Young's modulus E and Poisson's ratio ν."""
     return young * poisson / ((1 + poisson) * (1 - 2 * poisson)), young / (2 * (1 + poisson))
@@ -351,7 +502,8 @@ def elasticity(
     young, poisson
         E and ν of the plane models (−1 < ν < 1/2).
     split
-        ``"none"`` or ``"voldev"`` (plane models only): :class:`VolumetricDeviatoricSplit`.
+        ``"none"``, ``"voldev"`` (plane models): :class:`VolumetricDeviatoricSplit`, or
+        ``"spectral"`` (plane strain): :class:`SpectralSplit`.
     """
     if model == "antiplane":
         return AntiPlane()
@@ -360,4 +512,6 @@ def elasticity(
         lam = 2 * lam * mu / (lam + 2 * mu)
     if split == "voldev":
         return VolumetricDeviatoricSplit(lam, mu, 3 if model == "plane_strain" else 2)
+    if split == "spectral":
+        return SpectralSplit(lam, mu)
     return PlaneElasticity(lam, mu)

@@ -35,6 +35,11 @@ __all__ = ["HalfStepSolvers", "LinearStatistics"]
 
 log = logging.getLogger(__name__)
 
+SPLIT_STEP_TOL = 1e-10
+"""Newton step, relative to max |u|, below which the u-step of a split whose energy is not
+piecewise quadratic (``spectral``) has converged: Newton converges quadratically there, and
+the step of round-off (1e−16 times the condition of a_j) stays well below it."""
+
 
 @dataclass
 class LinearStatistics:
@@ -136,10 +141,12 @@ class HalfStepSolvers:
         """u-step: minimise I_j(·, v) over g(t_k) + X_{j,D} (Algorithm 1, step 2.1).
 
         Without an energy split this is one linear solve. With one, I_j(·, v) is convex and
-        piecewise quadratic (the volumetric part of an element degrades only in tension), and
-        a semismooth Newton method minimises it: solve with the element matrices of the current
-        tension pattern, halve the step while the energy would rise, and stop when the pattern
-        no longer changes (the minimiser of that quadratic piece is then the minimiser).
+        C¹, and a semismooth Newton method minimises it: solve with the element matrices of
+        the current pattern (:meth:`ngat.elasticity.Elasticity.tension`), halve the step while
+        the energy would rise. Where the energy is quadratic on each piece of the pattern
+        (``voldev``: the volumetric part of an element degrades only in tension) it stops when
+        a full step keeps the pattern (the minimiser of that piece is then the minimiser);
+        otherwise (``spectral``) when the step is below :data:`SPLIT_STEP_TOL` relative to u.
         """
         state, operators = self.state, self.operators
         u = state.u_values
@@ -164,7 +171,10 @@ class HalfStepSolvers:
         state = self.state
         u = state.u_values
         trial = u + step
-        if np.array_equal(state.elasticity.tension(state.arrays, trial), tension):
+        elasticity = state.elasticity
+        if elasticity.piecewise_quadratic and np.array_equal(
+            elasticity.tension(state.arrays, trial), tension
+        ):
             # The full step minimises the quadratic piece of the pattern it keeps: it lowers
             # the energy and is the minimiser, no energy evaluation needed.
             u[:] = trial
@@ -176,7 +186,8 @@ class HalfStepSolvers:
             scale /= 2
             trial = u + scale * step
         u[:] = trial
-        return np.abs(scale * step).max() <= 1e-14 * np.abs(u).max()
+        tol = 1e-14 if elasticity.piecewise_quadratic else SPLIT_STEP_TOL
+        return np.abs(scale * step).max() <= tol * np.abs(u).max()
 
     # -- v-step -----------------------------------------------------------------------------
     def solve_v(self, crack: np.ndarray) -> None:

@@ -45,7 +45,7 @@ def _convert(kind: type, value: Any) -> Any:
 MODELS = ("antiplane", "plane_strain", "plane_stress")
 """The elastic energy densities W of the functional (:mod:`ngat.elasticity`)."""
 
-SPLITS = ("none", "voldev")
+SPLITS = ("none", "voldev", "spectral")
 """The energy splits W = W⁺ + W⁻ (only W⁺ degrades; :mod:`ngat.elasticity`)."""
 
 
@@ -82,7 +82,9 @@ class ModelParameters:
     split
         ``"none"``: all of W degrades; ``"voldev"`` (plane models): only the deviatoric and the
         tensile volumetric energy degrade (Amor et al. 2009, :mod:`ngat.elasticity`), for scenes
-        with compression; the u-step is then solved by a semismooth Newton method.
+        with compression; ``"spectral"`` (plane strain): only the energy of the tensile
+        principal strains and of a tensile trace (Miehe et al. 2010). With a split the u-step is
+        solved by a semismooth Newton method.
     crack_density
         ``"at2"``: the paper's α P_j((1 − v)²) + ε |∇v|²; ``"at1"``: 3/(8ε) (1 − v) +
         (3ε/8) |∇v|², with an elastic phase below W = 3 G_c/(16ε) (:mod:`ngat.crack_density`).
@@ -144,9 +146,14 @@ class ModelParameters:
             raise ParameterError(f"split must be one of {', '.join(SPLITS)}, got {self.split!r}")
         if self.split != "none" and self.model == "antiplane":
             raise ParameterError(
-                f"split={self.split} splits the strain into volumetric and deviatoric parts: "
+                f"split={self.split} splits the in-plane strain tensor: "
                 "the antiplane model has no volumetric strain; choose model=plane_strain or "
                 "plane_stress, or split=none"
+            )
+        if self.split == "spectral" and self.model != "plane_strain":
+            raise ParameterError(
+                "split=spectral splits the strain by its principal values, with ε_zz = 0 the "
+                f"third: it needs model=plane_strain, got model={self.model}"
             )
         if self.crack_density not in CRACK_DENSITIES:
             raise ParameterError(

@@ -328,4 +328,92 @@ def test_split_on_the_antiplane_model_is_refused():
     with pytest.raises(ParameterError, match="antiplane model has no volumetric strain"):
         Parameters().replace(split="voldev")
     with pytest.raises(ParameterError, match="split must be one of"):
-        Parameters().replace(model="plane_strain", split="spectral")
+        Parameters().replace(model="plane_strain", split="star")
+    with pytest.raises(ParameterError, match="split=spectral .* needs model=plane_strain"):
+        Parameters().replace(model="plane_stress", split="spectral")
+
+
+MIXED = CF((0.1 * x * x - 0.05 * y + 0.07 * x * y, 0.03 * x * y - 0.08 * y * y + 0.02 * x))
+"""A displacement whose elements have principal strains of both signs and both traces."""
+
+
+def test_spectral_split_parts_and_weights_give_the_split_energy():
+    # W⁺ + W⁻ = W and s⁺ + s⁻ = s; W± = s±:ε (degree-2 homogeneity); with c_T the u-step's
+    # element matrix Σ_k w_k K_k gives u_T·(Σ w_k K_k) u_T = |T| (c W⁺ + W⁻), and with c = 1
+    # it is the unsplit element matrix.
+    state = plane_state("plane_strain", split="spectral")
+    state.u.Set(MIXED)
+    split, arrays, u = state.elasticity, state.arrays, state.u_values
+    whole = elasticity("plane_strain", E, NU)
+    signs = split.tension(arrays, u)
+    assert signs[:, 0].any() and not signs[:, 0].all()
+    assert (signs[:, 1] & ~signs[:, 2]).any() and (signs[:, 1] == signs[:, 2]).any()
+    W_plus, W_minus = split.degraded_density(arrays, u), split.intact_density(arrays, u)
+    W = whole.density(arrays, u)
+    np.testing.assert_allclose(W_plus + W_minus, W, rtol=1e-12, atol=1e-13 * W.max())
+    assert np.all(W_plus >= 0) and np.all(W_minus >= 0)
+    gradient = split.gradient(arrays, u)
+    plus, minus = split.fluxes(gradient)
+    np.testing.assert_allclose(plus + minus, whole.flux(gradient), atol=1e-15)
+    np.testing.assert_allclose(np.einsum("eij,eij->e", plus, gradient), W_plus, atol=1e-14)
+    parts, local = split.parts(arrays), u[split.element_dofs(arrays)]
+    c = np.random.default_rng(3).random(arrays.ne)
+    weights = split.weights(arrays, u, c)
+    matrix = sum(w[:, None, None] * k for w, k in zip(weights, parts, strict=True))
+    np.testing.assert_allclose(
+        np.einsum("ea,eab,eb->e", local, matrix, local),
+        arrays.area * (c * W_plus + W_minus),
+        rtol=1e-12, atol=1e-14 * (arrays.area * W).max(),
+    )  # fmt: skip
+    weights = split.weights(arrays, u, np.ones(arrays.ne))
+    unsplit = sum(w[:, None, None] * k for w, k in zip(weights, parts, strict=True))
+    np.testing.assert_allclose(unsplit, whole.element_stiffness(arrays), atol=1e-13)
+
+
+def test_spectral_split_keeps_half_of_a_pure_shear():
+    # ε = γ (e₁⊗e₂ + e₂⊗e₁) has principal strains ±γ: W⁺ = W⁻ = μγ², where the
+    # volumetric–deviatoric split degrades all of W = 2μγ².
+    gamma = 0.01
+    state = plane_state("plane_strain", split="spectral")
+    state.u.Set(CF((gamma * y, gamma * x)))
+    arrays, u = state.arrays, state.u_values
+    mu = lame(E, NU)[1]
+    np.testing.assert_allclose(state.elasticity.degraded_density(arrays, u), mu * gamma**2)
+    np.testing.assert_allclose(state.elasticity.intact_density(arrays, u), mu * gamma**2)
+    voldev = elasticity("plane_strain", E, NU, split="voldev")
+    np.testing.assert_allclose(voldev.degraded_density(arrays, u), 2 * mu * gamma**2)
+
+
+def test_spectral_newton_gradient_and_hessian_are_those_of_the_energy(
+    assert_newton_matches_ngsolve,
+):
+    # The spectral energy is C¹; away from ρ = 0 and from sign changes of the eigenvalues its
+    # Hessian is NGSolve's linearisation of the closed-form eigenvalues p ± ρ.
+    state = plane_state("plane_strain", gc=0.4, eps=0.1, split="spectral")
+    state.u.Set(MIXED)
+    rng = np.random.default_rng(7)
+    assert_newton_matches_ngsolve(state, state.u_values.copy(), rng.random(state.arrays.nv))
+
+
+def test_spectral_u_step_is_the_minimiser_of_the_split_energy():
+    # The Newton u-step ends where the gradient A(u) u of the convex C¹ bulk energy vanishes at
+    # the free DOFs, and at another u than the volumetric–deviatoric split's.
+    def u_step(split):
+        state = plane_state("plane_strain", split=split)
+        steps = HalfStepSolvers(state)
+        state.apply_load(5.0)
+        state.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
+        steps.solve_u()
+        return state, steps
+
+    state, steps = u_step("spectral")
+    signs = state.elasticity.tension(state.arrays, state.u_values)
+    assert (signs[:, 1] & ~signs[:, 2]).any()
+    operators = steps.operators
+    residual = operators.a_matrix.CreateColVector()
+    operators.assemble_a()
+    residual.data = operators.a_matrix * state.u.vec
+    r = residual.FV().NumPy()
+    assert np.abs(r[~state.dirichlet]).max() < 1e-9 * np.abs(r).max()
+    voldev, _ = u_step("voldev")
+    assert np.abs(voldev.u_values - state.u_values).max() > 1e-3 * np.abs(state.u_values).max()
