@@ -375,24 +375,20 @@ class SpectralSplit(PlaneElasticity):
         r = (gradient[:, 0, 1] + gradient[:, 1, 0]) / 2
         return p, q, r, np.hypot(q, r)
 
-    def _plus(self, gradient: np.ndarray) -> np.ndarray:
+    def _energy(self, gradient: np.ndarray, clip) -> np.ndarray:
+        """Return (λ/2) clip(tr ε)² + μ (clip(ε₁)² + clip(ε₂)²) with clip = ⟨·⟩₊ or ⟨·⟩₋."""
         p, _, _, rho = self.invariants(gradient)
-        positive = np.maximum
-        return self.lam / 2 * positive(2 * p, 0.0) ** 2 + self.mu * (
-            positive(p + rho, 0.0) ** 2 + positive(p - rho, 0.0) ** 2
+        return self.lam / 2 * clip(2 * p, 0.0) ** 2 + self.mu * (
+            clip(p + rho, 0.0) ** 2 + clip(p - rho, 0.0) ** 2
         )
 
     def degraded_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
         """Return W⁺ = (λ/2)⟨tr ε⟩₊² + μ(⟨ε₁⟩₊² + ⟨ε₂⟩₊²)."""
-        return self._plus(self.gradient(arrays, u))
+        return self._energy(self.gradient(arrays, u), np.maximum)
 
     def intact_density(self, arrays: MeshArrays, u: np.ndarray) -> np.ndarray:
         """Return W⁻ = W − W⁺ = (λ/2)⟨tr ε⟩₋² + μ(⟨ε₁⟩₋² + ⟨ε₂⟩₋²)."""
-        p, _, _, rho = self.invariants(self.gradient(arrays, u))
-        negative = np.minimum
-        return self.lam / 2 * negative(2 * p, 0.0) ** 2 + self.mu * (
-            negative(p + rho, 0.0) ** 2 + negative(p - rho, 0.0) ** 2
-        )
+        return self._energy(self.gradient(arrays, u), np.minimum)
 
     def fluxes(self, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return s⁺ = (λ/2)⟨tr ε⟩₊ I + μ ε₊ and s⁻ = s − s⁺.

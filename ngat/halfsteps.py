@@ -164,7 +164,7 @@ class HalfStepSolvers:
             step = self._correction.FV().NumPy().copy()
             if self._split_step(step, tension):
                 return
-        log.warning("split u-step: tension pattern not settled after %d iterations", max_iterations)
+        log.warning("split u-step: not converged after %d Newton iterations", max_iterations)
 
     def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
         """Move u along a semismooth Newton step; return whether the u-step has converged."""
