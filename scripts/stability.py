@@ -12,7 +12,8 @@ changed per case as listed in ``CASES``; the cases in ``CASE_SCENES`` use their 
 instead (``obtuse-line``: a fixed sheared mesh, every triangle with a 161.6° angle, sheared
 anti-plane between two slanted grips until it breaks, with the lumped and with the consistent
 mass, ``lumping=false``; ``sent`` and ``sens``: the plane-strain benchmarks at ε = 0.02 mm,
-``sens`` with and without the volumetric–deviatoric split, judged by their crack paths).
+``sens`` with the volumetric–deviatoric split, without a split and with the spectral
+split, judged by their crack paths).
 Each cell runs in its own process with a time limit and records:
 status (converged, not converged, failed with the error, timeout and the load time reached), AM
 iterations, linear solves, Newton steps, steps along negative curvature and the extra solves
@@ -79,6 +80,7 @@ CASES = {
     "sent (plane strain, ε=0.02)": (PLANE, SENT_TIMES),
     "sens (plane strain, ε=0.02, split)": (PLANE, SENS_TIMES),
     "sens (plane strain, ε=0.02, no split)": ({**PLANE, "split": "none"}, SENS_TIMES),
+    "sens (plane strain, ε=0.02, spectral split)": ({**PLANE, "split": "spectral"}, SENS_TIMES),
 }  # fmt: skip
 # Cases with their own scene (the others run two-slits).
 CASE_SCENES = {
