@@ -20,9 +20,8 @@ area, plane problems per unit thickness), G_c in energy per length of crack (for
 A plane model may split W = W⁺ + W⁻ and degrade only W⁺ (``split=voldev``,
 :class:`VolumetricDeviatoricSplit`, or ``split=spectral``, :class:`SpectralSplit`): I_j then
 has (P_j(v²) + η) W⁺ + W⁻ in place of (P_j(v²) + η) W, and every method below has its split
-counterpart (``degraded_density``,
-``intact_density``, ``fluxes``, ``parts`` and ``weights``); without a split they return W, 0 and
-the one element matrix.
+counterpart (``degraded_density``, ``intact_density``, ``fluxes``, ``parts`` and ``weights``);
+without a split they return W, 0 and the one element matrix.
 
 An :class:`Elasticity` gives the P1 space of u and, from it, the symbolic bilinear form (the
 definition, :func:`ngat.forms.a_form`), the element matrices of the fast assembly
@@ -433,14 +432,17 @@ class SpectralSplit(PlaneElasticity):
         up, down = (p + rho > 0).astype(float), (p - rho > 0).astype(float)
         f_pp = 2 * mu * (up + down)
         f_prho = 2 * mu * (up - down)
-        # F_ρ/ρ, with its limit 4μ H(p) at ρ = 0 (equal eigenvalues)
+        # F_ρ/ρ and the direction n = (q, r)/ρ; at ρ = 0 (equal eigenvalues) F_ρ/ρ → 4μ H(p)
+        # and any n gives the same Hessian.
+        distinct = rho > 0
+        safe = np.where(distinct, rho, 1.0)
         quotient = np.where(
-            rho > 0,
-            2 * mu * (np.maximum(p + rho, 0) - np.maximum(p - rho, 0)) / np.where(rho > 0, rho, 1),
+            distinct,
+            2 * mu * (np.maximum(p + rho, 0) - np.maximum(p - rho, 0)) / safe,
             4 * mu * (p > 0),
         )
-        nq = np.where(rho > 0, q / np.where(rho > 0, rho, 1), 1.0)
-        nr = np.where(rho > 0, r / np.where(rho > 0, rho, 1), 0.0)
+        nq = np.where(distinct, q / safe, 1.0)
+        nr = np.where(distinct, r / safe, 0.0)
         plus = np.empty((len(p), 3, 3))
         plus[:, 0, 0] = 4 * lam * (p > 0) + f_pp
         plus[:, 0, 1] = plus[:, 1, 0] = f_prho * nq
