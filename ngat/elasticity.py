@@ -429,18 +429,15 @@ class SpectralSplit(PlaneElasticity):
         """Return the Hessians of W⁺ and of W in (p, q, r), each (ne, 3, 3)."""
         p, q, r, rho = self.invariants(gradient)
         lam, mu = self.lam, self.mu
-        up, down = (p + rho > 0).astype(float), (p - rho > 0).astype(float)
-        f_pp = 2 * mu * (up + down)
-        f_prho = 2 * mu * (up - down)
-        # F_ρ/ρ and the direction n = (q, r)/ρ; at ρ = 0 (equal eigenvalues) F_ρ/ρ → 4μ H(p)
-        # and any n gives the same Hessian.
+        up, down = p + rho > 0, p - rho > 0  # H(ε₁), H(ε₂): which principal strains degrade
+        f_pp = 2 * mu * (up.astype(float) + down)
+        f_prho = 2 * mu * (up.astype(float) - down)
+        # F_ρ/ρ = 2μ(⟨p + ρ⟩₊ − ⟨p − ρ⟩₊)/ρ without the cancellation of a difference over a
+        # round-off ρ: 4μ with both principal strains positive, 0 with neither, 2μ(p + ρ)/ρ
+        # with one (then ρ ≥ |p|). Where ρ = 0 any direction n = (q, r)/ρ gives the same Hessian.
         distinct = rho > 0
         safe = np.where(distinct, rho, 1.0)
-        quotient = np.where(
-            distinct,
-            2 * mu * (np.maximum(p + rho, 0) - np.maximum(p - rho, 0)) / safe,
-            4 * mu * (p > 0),
-        )
+        quotient = np.where(down, 4 * mu, np.where(up, 2 * mu * (p + rho) / safe, 0.0))
         nq = np.where(distinct, q / safe, 1.0)
         nr = np.where(distinct, r / safe, 0.0)
         plus = np.empty((len(p), 3, 3))

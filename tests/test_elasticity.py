@@ -417,3 +417,20 @@ def test_spectral_u_step_is_the_minimiser_of_the_split_energy():
     assert np.abs(r[~state.dirichlet]).max() < 1e-9 * np.abs(r).max()
     voldev, _ = u_step("voldev")
     assert np.abs(voldev.u_values - state.u_values).max() > 1e-3 * np.abs(state.u_values).max()
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_spectral_split_of_an_isotropic_strain(sign):
+    # ε = ±0.01 I has equal principal strains (ρ = 0, the Hessian's limit): in tension all of
+    # W degrades and the element matrix is c K, in compression none does and it is K.
+    state = plane_state("plane_strain", split="spectral")
+    state.u.Set(CF((sign * 0.01 * x, sign * 0.01 * y)))
+    split, arrays, u = state.elasticity, state.arrays, state.u_values
+    W = elasticity("plane_strain", E, NU).density(arrays, u)
+    W_plus = split.degraded_density(arrays, u)
+    np.testing.assert_allclose(W_plus, W if sign > 0 else 0 * W, atol=1e-15)
+    c = np.full(arrays.ne, 0.3)
+    weights = split.weights(arrays, u, c)
+    matrix = sum(w[:, None, None] * k for w, k in zip(weights, split.parts(arrays), strict=True))
+    factor = 0.3 if sign > 0 else 1.0
+    np.testing.assert_allclose(matrix, factor * split.element_stiffness(arrays), atol=1e-13)
