@@ -269,29 +269,36 @@ def test_voldev_newton_gradient_and_hessian_are_those_of_the_energy(assert_newto
     assert_newton_matches_ngsolve(state, state.u_values.copy(), rng.random(state.arrays.nv))
 
 
-def test_voldev_u_step_is_the_minimiser_of_the_split_energy():
-    # With v varying and a load that compresses part of the body, the semismooth Newton u-step
-    # ends at a u whose own tension pattern makes it stationary: the gradient 2 A(P(u)) u of
-    # the convex C¹ bulk energy vanishes at the free DOFs, so u is its minimiser.
-    state = plane_state("plane_strain", split="voldev")
+def u_step_under_load(split: str):
+    """Return the state and its half-step solvers after one u-step: load 5, v varying."""
+    state = plane_state("plane_strain", split=split)
     steps = HalfStepSolvers(state)
     state.apply_load(5.0)
     state.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
     steps.solve_u()
-    tension = state.elasticity.tension(state.arrays, state.u_values)
-    assert tension.any() and not tension.all()
+    return state, steps
+
+
+def u_step_gradient(state, steps) -> np.ndarray:
+    """Return A(u) u, the gradient of the u-step's energy at u (a split's A at its own u)."""
     operators = steps.operators
     residual = operators.a_matrix.CreateColVector()
     operators.assemble_a()
     residual.data = operators.a_matrix * state.u.vec
-    r = residual.FV().NumPy()
+    return residual.FV().NumPy().copy()
+
+
+def test_voldev_u_step_is_the_minimiser_of_the_split_energy():
+    # With v varying and a load that compresses part of the body, the semismooth Newton u-step
+    # ends at a u whose own tension pattern makes it stationary: the gradient 2 A(P(u)) u of
+    # the convex C¹ bulk energy vanishes at the free DOFs, so u is its minimiser.
+    state, steps = u_step_under_load("voldev")
+    tension = state.elasticity.tension(state.arrays, state.u_values)
+    assert tension.any() and not tension.all()
+    r = u_step_gradient(state, steps)
     assert np.abs(r[~state.dirichlet]).max() < 1e-10 * np.abs(r).max()
     # The unsplit u-step on the same v gives another u, with more energy in compression.
-    unsplit = plane_state("plane_strain")
-    unsplit_steps = HalfStepSolvers(unsplit)
-    unsplit.apply_load(5.0)
-    unsplit.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
-    unsplit_steps.solve_u()
+    unsplit, _ = u_step_under_load("none")
     assert np.abs(unsplit.u_values - state.u_values).max() > 1e-3 * np.abs(state.u_values).max()
 
 
@@ -398,24 +405,12 @@ def test_spectral_newton_gradient_and_hessian_are_those_of_the_energy(
 def test_spectral_u_step_is_the_minimiser_of_the_split_energy():
     # The Newton u-step ends where the gradient A(u) u of the convex C¹ bulk energy vanishes at
     # the free DOFs, and at another u than the volumetric–deviatoric split's.
-    def u_step(split):
-        state = plane_state("plane_strain", split=split)
-        steps = HalfStepSolvers(state)
-        state.apply_load(5.0)
-        state.v.Set(0.2 + 0.8 * (x - 0.5) ** 2 + 0.5 * y * y)
-        steps.solve_u()
-        return state, steps
-
-    state, steps = u_step("spectral")
+    state, steps = u_step_under_load("spectral")
     signs = state.elasticity.tension(state.arrays, state.u_values)
     assert (signs[:, 1] & ~signs[:, 2]).any()
-    operators = steps.operators
-    residual = operators.a_matrix.CreateColVector()
-    operators.assemble_a()
-    residual.data = operators.a_matrix * state.u.vec
-    r = residual.FV().NumPy()
+    r = u_step_gradient(state, steps)
     assert np.abs(r[~state.dirichlet]).max() < 1e-9 * np.abs(r).max()
-    voldev, _ = u_step("voldev")
+    voldev, _ = u_step_under_load("voldev")
     assert np.abs(voldev.u_values - state.u_values).max() > 1e-3 * np.abs(state.u_values).max()
 
 
