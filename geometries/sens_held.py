@@ -12,19 +12,14 @@ from __future__ import annotations
 
 import dataclasses
 
-from netgen.occ import X, Y
+from netgen.occ import X
 
-from ngat.geometries import sens
-from ngat.geometry import polygon_face
-
-NOTCHED_SQUARE = [(0, 0), (1, 0), (1, 1), (0, 1), (0, 0.5), (0.5, 0.5), (0, 0.5)]
+from ngat.geometries import sens, sent
 
 
 def geometry():
-    """Return the notched unit square with ``bottom``, ``top``, ``left`` and ``right`` named."""
-    square = polygon_face(NOTCHED_SQUARE, "body")
-    square.edges.Min(Y).name = "bottom"
-    square.edges.Max(Y).name = "top"
+    """Return ``sent``'s notched square with its ``left`` and ``right`` edges named as well."""
+    square = sent.geometry()
     square.edges.Max(X).name = "right"
     for edge in square.edges:
         if abs(edge.center.x) < 1e-12:  # both parts of the left edge, above and below the notch
