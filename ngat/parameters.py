@@ -180,11 +180,13 @@ class SolverParameters:
         Stop when the distance to the fixed point, estimated from ‖v^n − v^{n−1}‖_∞, is below
         am_tol (``am_stop``).
     am_stop
-        ``"contraction"`` (default): the change ‖v^n − v^{n−1}‖_∞ multiplied by ρ/(1 − ρ)
-        where the iteration contracts slowly (ρ the ratio of the last two changes,
-        :func:`ngat.strategies.estimated_error`), so that a crack front creeping by a little
-        less than am_tol per iteration does not stop the step; ``"change"``: the change
-        itself (the paper, Algorithm 1).
+        ``"contraction"`` (default): the change of v outside the crack (v ≥ 0.1; inside, the
+        change is scaled by v/0.1, :func:`ngat.minimization.load_bearing_change`) multiplied
+        by ρ/(1 − ρ) where the iteration contracts slowly (ρ the ratio of the last two
+        changes, :func:`ngat.strategies.estimated_error`), so that a crack front creeping by a
+        little less than am_tol per iteration does not stop the step, and v drifting towards
+        0 inside an opening crack does not hold it; ``"change"``: ‖v^n − v^{n−1}‖_∞ itself
+        (the paper, Algorithm 1).
     am_max_iter
         Iteration limit per load step.
     max_cg
