@@ -26,12 +26,14 @@ from typing import IO, Any
 from xml.sax.saxutils import quoteattr
 
 import ngsolve
+import numpy as np
 
 from ngat.parameters import with_legacy_values
 
 __all__ = [
     "ResultsWriter",
     "vtu_name",
+    "write_vtu",
     "atomic_file",
     "write_atomic",
     "writing",
@@ -256,6 +258,38 @@ def vtu_name(step: int) -> str:
     return f"fields/step_{step:04d}.vtu"
 
 
+def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
+    """Write P1 fields on a triangle mesh to the VTU file ``path`` (raw binary).
+
+    One point per mesh vertex, shared by its triangles, and the nodal values as point data
+    (a plane model's u with its two components). NGSolve's ``VTKOutput`` writes ASCII with
+    three points per triangle. Uncompressed, so that a step's file has the same size on the
+    same mesh whatever the values (``tests/test_output_growth.py``).
+
+    Parameters
+    ----------
+    path
+        The file to write.
+    mesh
+        The triangle mesh of the fields.
+    fields
+        Name → P1 GridFunction (H1 or VectorH1 of order 1, whose DOFs are the vertices).
+    """
+    import pyvista  # only the VTU writer needs it; keep `import ngat` light
+
+    ngmesh = mesh.ngmesh
+    points = ngmesh.Coordinates()
+    triangles = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+    cells = np.hstack([np.full((len(triangles), 1), 3, dtype=np.int64), triangles]).ravel()
+    types = np.full(len(triangles), pyvista.CellType.TRIANGLE, dtype=np.uint8)
+    grid = pyvista.UnstructuredGrid(cells, types, np.c_[points[:, :2], np.zeros(len(points))])
+    for name, field in fields.items():
+        values = field.vec.FV().NumPy()
+        dim = len(values) // len(points)
+        grid.point_data[name] = values.reshape(dim, -1).T.copy() if dim > 1 else values.copy()
+    grid.save(path, binary=True, compression=None)
+
+
 PVD_HEAD = b'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
 PVD_TAIL = b"  </Collection>\n</VTKFile>\n"
 """The bytes of ``fields.pvd`` before and after its entries."""
@@ -397,14 +431,8 @@ class ResultsWriter:
         """Write the VTU ``name``; raise :class:`OSError` and remove it unless it is complete."""
         path = self.folder / name
         try:
-            ngsolve.VTKOutput(
-                ma=mesh,
-                coefs=list(fields.values()),
-                names=list(fields),
-                filename=str(path.with_suffix("")),
-                subdivision=0,
-            ).Do()
-            # NGSolve does not report a failed write (it truncates the file on a full disk).
+            write_vtu(path, mesh, fields)
+            # VTK's writer does not raise on a failed write (it leaves the file cut short).
             if not _ends_with(path, VTU_END):
                 raise OSError(errno.EIO, f"{path.name} came out incomplete; is the disk full?")
         except BaseException:

@@ -141,3 +141,30 @@ def test_a_failed_fields_entry_leaves_fields_pvd_valid(tmp_path, monkeypatch):
     assert series(folder) == ["fields/step_0000.vtu", "fields/step_0001.vtu"]
     run(scene, parameters, times, folder, resume=True)
     assert series(folder) == [f"fields/step_{k:04d}.vtu" for k in range(6)]
+
+
+def test_vtu_holds_the_p1_fields_at_the_mesh_vertices(tmp_path):
+    # One point per vertex (shared by its triangles) and the nodal values as point data, a
+    # vector field with its two components; pyvista reads it back exactly (binary).
+    import ngsolve
+    import pyvista
+    from netgen.geom2d import unit_square
+
+    from ngat.output import VTU_END, write_vtu
+
+    mesh = ngsolve.Mesh(unit_square.GenerateMesh(maxh=0.2))
+    v = ngsolve.GridFunction(ngsolve.H1(mesh, order=1))
+    u = ngsolve.GridFunction(ngsolve.VectorH1(mesh, order=1))
+    v.Set(ngsolve.x - 2 * ngsolve.y)
+    u.Set(ngsolve.CF((ngsolve.x + 1, 2 * ngsolve.y - 3)))
+    path = tmp_path / "step.vtu"
+    write_vtu(path, mesh, {"u": u, "v": v})
+    assert path.read_bytes().endswith(VTU_END)
+    grid = pyvista.read(path)
+    assert (grid.n_points, grid.n_cells) == (mesh.nv, mesh.ne)
+    x, y = grid.points[:, 0], grid.points[:, 1]
+    np.testing.assert_allclose(grid.point_data["v"], x - 2 * y, atol=1e-14)
+    np.testing.assert_allclose(grid.point_data["u"], np.c_[x + 1, 2 * y - 3], atol=1e-14)
+    corners = grid.points[grid.cells.reshape(-1, 4)[:, 1:]][..., :2]
+    areas = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) / 2
+    assert abs(areas).sum() == pytest.approx(1.0)
