@@ -8,9 +8,9 @@ contraction of the last two changes (``am_stop="contraction"``,
 fraction of the way still to go, and the paper's test on the change itself stops the step with
 the crack short of its equilibrium. It measures the change where the material still bears load
 (:func:`load_bearing_change`): inside a crack, v drifts slowly towards 0 as the crack opens, with
-no effect on the energies, and would hold later steps for tens of iterations.
-Algorithm 2 refines inside each half-step: solve, estimate
-(μ for the u-step, ν for the v-step, Proposition 4), mark, refine, until the estimator is ≤ TOL.
+no effect on the energies, and would hold later steps for tens of iterations. Algorithm 2
+refines inside each half-step: solve, estimate (μ for the u-step, ν for the v-step,
+Proposition 4), mark, refine, until the estimator is ≤ TOL.
 The variant ``"after"`` runs Algorithm 1 to convergence first and refines only then. The
 default ``"band"`` is Algorithm 2 with the crack band resolved after every v-step
 (:class:`ngat.band.CrackBand`): an iteration that refined the band does not count as converged.

@@ -28,6 +28,7 @@ from xml.sax.saxutils import quoteattr
 import ngsolve
 import numpy as np
 
+from ngat.band import mesh_geometry
 from ngat.parameters import with_legacy_values
 
 __all__ = [
@@ -277,12 +278,10 @@ def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
     """
     import pyvista  # only the VTU writer needs it; keep `import ngat` light
 
-    ngmesh = mesh.ngmesh
-    points = ngmesh.Coordinates()
-    triangles = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+    points, triangles = mesh_geometry(mesh)
     cells = np.hstack([np.full((len(triangles), 1), 3, dtype=np.int64), triangles]).ravel()
     types = np.full(len(triangles), pyvista.CellType.TRIANGLE, dtype=np.uint8)
-    grid = pyvista.UnstructuredGrid(cells, types, np.c_[points[:, :2], np.zeros(len(points))])
+    grid = pyvista.UnstructuredGrid(cells, types, np.c_[points, np.zeros(len(points))])
     for name, field in fields.items():
         values = field.vec.FV().NumPy()
         dim = len(values) // len(points)
