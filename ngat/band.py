@@ -34,6 +34,11 @@ The refinement has hysteresis: it fires only when a coarse element comes within 
 times those radii (a crack front that has crossed half of the resolved margin), and then
 resolves the whole band. Without it a running crack moves the band's edge a little at every
 iteration and every iteration pays for a bisection and a rebuild of the operators.
+
+While a load step's iteration searches for its crack the target is coarser
+(:meth:`CrackBand.search`, ``band_search`` times it): a crack that runs through the body in one
+step does so on a quarter of the new elements, and the band is resolved to its target once the
+iteration has converged, after which it converges again on that mesh.
 """
 
 from __future__ import annotations
@@ -141,6 +146,15 @@ class CrackBand:
         (1: no hysteresis).
     grading
         Growth g of the target diameter per unit distance beyond the band (0: no grading).
+    search
+        Factor of the target while a load step's iteration searches for its crack
+        (:meth:`search`; 1: none).
+
+    Attributes
+    ----------
+    target : float
+        The element diameter the band is resolved to now: ``band_h · ε``, or ``search`` times
+        that between :meth:`search` and :meth:`end_search`.
     """
 
     def __init__(
@@ -151,12 +165,37 @@ class CrackBand:
         h_floor: float,
         trigger: float = TRIGGER,
         grading: float = 0.0,
+        search: float = 1.0,
     ):
         self.eps = eps
-        self.target = max(band_h * eps, 2 * h_floor)
+        self.resolved = max(band_h * eps, 2 * h_floor)
+        self.searched = max(search * band_h * eps, 2 * h_floor)
+        self.target = self.resolved
         self.slits = list(slits)
         self.trigger = trigger
         self.grading = grading
+        self._clear: tuple | None = None
+
+    def search(self) -> None:
+        """Resolve the band to the coarser target of a step's search for its crack.
+
+        Where the load step is unstable, a crack runs a whole ligament before the iteration
+        settles, hundreds of iterations in which the band follows its tip. On the coarser band
+        (the default: twice the diameter, a quarter of the new elements) the crack finds its
+        path; :meth:`end_search` then resolves the band to ``band_h · ε`` and the iteration
+        converges again on that mesh, so a converged step has the same band either way.
+        Measured on the paper's example from its checkpoint at t = 1.38 (the break step):
+        139 iterations and 388 linear solves against 249 and 782, 184k against 200k elements
+        (three iterations after the band was resolved), total energy 3.2261 against 3.2180
+        (the converged reference: 3.2245).
+        """
+        self.target = self.searched
+
+    def end_search(self) -> bool:
+        """Set the target back to ``band_h · ε``; return whether a search was on."""
+        searching = self.target != self.resolved
+        self.target = self.resolved
+        return searching
 
     def centres(self, state: ATState) -> tuple[np.ndarray, np.ndarray]:
         """Return the damaged vertices (v < ``DAMAGED``) and the slits' crack tips (of v)."""
@@ -273,10 +312,14 @@ class CrackBand:
 
         Nothing is done unless a coarse element lies within ``trigger`` times the band's radii
         (the grading, if any, is refined along with the band)
-        (hysteresis, see the module docstring). The centres (damaged vertices, tips) are taken
-        once, on the current mesh: bisection only adds vertices between old ones, so the
-        damaged set of the prolongated v lies within the band around them; the operators are
-        rebuilt once, after the last bisection.
+        (hysteresis, see the module docstring). After a call that did nothing, the next call
+        on the same mesh searches about the vertices damaged since and the tips only: the
+        trigger's reach about the union of two vertex sets is the union of their reaches, and
+        the vertices damaged then had no coarse element within it (the search about all damaged
+        vertices after every v-step cost 0.17 s at 200k elements). The centres (damaged
+        vertices, tips) are taken once, on the current mesh: bisection only adds vertices
+        between old ones, so the damaged set of the prolongated v lies within the band around
+        them; the operators are rebuilt once, after the last bisection.
 
         Parameters
         ----------
@@ -292,10 +335,19 @@ class CrackBand:
         with state.timer("band"):
             damaged, centres = self.centres(state)
             coords, elements = arrays.coords, arrays.elements
-            marked = self.marked(coords, elements, damaged, centres, arrays.diameter)
-            triggered = self.triggered(coords, elements[marked], damaged, centres)
+            is_damaged = state.v_values < DAMAGED
+            searched = damaged
+            if self._clear is not None and self._clear[:2] == (arrays, self.target):
+                searched = coords[is_damaged & ~self._clear[2]]
+            marked = self.marked(coords, elements, searched, centres, arrays.diameter)
+            triggered = self.triggered(coords, elements[marked], searched, centres)
         if not triggered:
+            self._clear = (arrays, self.target, is_damaged)
             return 0
+        self._clear = None
+        if searched is not damaged:
+            with state.timer("band"):
+                marked = self.marked(coords, elements, damaged, centres, arrays.diameter)
         graded = self.running(centres)
         everywhere = np.concatenate([damaged, centres]) if graded else np.empty((0, 2))
         rounds = 0

@@ -110,7 +110,7 @@ def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
         return None
     return CrackBand(
         eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps,
-        grading=adaptivity.band_grading,
+        grading=adaptivity.band_grading, search=adaptivity.band_search,
     )  # fmt: skip
 
 

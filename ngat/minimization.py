@@ -14,6 +14,8 @@ Proposition 4), mark, refine, until the estimator is ≤ TOL.
 The variant ``"after"`` runs Algorithm 1 to convergence first and refines only then. The
 default ``"band"`` is Algorithm 2 with the crack band resolved after every v-step
 (:class:`ngat.band.CrackBand`): an iteration that refined the band does not count as converged.
+The band is coarser until the iteration first converges (:meth:`ngat.band.CrackBand.search`),
+then resolved to its target, and the iteration goes on to convergence on that mesh.
 
 The loop is the same for every ``nonlinear`` solver, all with the same stopping test on an
 alternating-minimisation iteration; what a solver adds between the half-steps (acceleration,
@@ -318,6 +320,8 @@ def alternating_minimization(
     strategy.start(state, half_steps)
     if extension:
         extension.start()
+    if band:
+        band.search()
     previous, moved = np.inf, 0.0  # the last iteration's change, the strategy's step after it
     while result.iterations < solver.am_max_iter:
         result.iterations += 1
@@ -331,14 +335,7 @@ def alternating_minimization(
         _half_step(state, half_steps, "v", adaptivity, result)
         if monitor:
             monitor("v", state)
-        band_rounds = band.refine(state) if band else 0
-        if band_rounds:
-            result.band_refinements += band_rounds
-            result.refinements += band_rounds
-            result.history.append(
-                {"iteration": result.iterations, "stage": "band", "elements": elements,
-                 "estimate": 0.0, "new_elements": state.arrays.ne}
-            )  # fmt: skip
+        band_rounds = _resolve_band(state, band, result) if band else 0
         energy = state.energies()["total"]
         strategy.next_iterate(state)
         if result.energies and elements == state.arrays.ne:
@@ -360,6 +357,8 @@ def alternating_minimization(
         previous = measured
         if result.iterations % PROGRESS_EVERY == 0:
             _log_progress(state, result)
+        if error < solver.am_tol and not band_rounds and band and band.end_search():
+            band_rounds = _resolve_band(state, band, result)
         if error < solver.am_tol and not band_rounds:
             if adaptivity.adapt == "after" and _refine_after(state, adaptivity, result):
                 continue
@@ -382,12 +381,31 @@ def alternating_minimization(
             solver.am_max_iter,
             result.change,
         )
+    if band:
+        band.end_search()
     _record_statistics(result, half_steps, strategy)
     if extension:
         result.extensions = extension.jumps
         result.band_refinements += extension.band_rounds
         result.refinements += extension.band_rounds
     return result
+
+
+def _resolve_band(state: ATState, band: CrackBand, result: StepResult) -> int:
+    """Resolve the crack band after a v-step (:meth:`ngat.band.CrackBand.refine`).
+
+    Returns the bisection rounds (0: the mesh is unchanged) and records them in ``result``.
+    """
+    elements = state.arrays.ne
+    rounds = band.refine(state)
+    if rounds:
+        result.band_refinements += rounds
+        result.refinements += rounds
+        result.history.append(
+            {"iteration": result.iterations, "stage": "band", "elements": elements,
+             "estimate": 0.0, "new_elements": state.arrays.ne}
+        )  # fmt: skip
+    return rounds
 
 
 def _log_progress(state: ATState, result: StepResult) -> None:

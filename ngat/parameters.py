@@ -305,6 +305,13 @@ class AdaptivityParameters:
         0.18, the grading and the re-meshing a crack runs within 2 % of its speed on
         ``surfing`` from a coarse unstructured mesh (0.25 with the re-meshing and no grading:
         0.963 V; ``docs/adaptivity.md``, items 12 and 13).
+    band_search
+        Coarsening of the crack band while a load step's iteration searches for its crack
+        (``adapt="band"``): until the iteration converges the band is resolved to
+        ``band_search · band_h · ε``, then to ``band_h · ε``, and the iteration goes on to
+        convergence on that mesh (:meth:`ngat.band.CrackBand.search`). Where a crack runs
+        through the body in one step, the hundreds of iterations of its run are spent on a
+        band with a quarter of the elements at the default 2 (1: no coarser band).
     band_grading
         Growth of the crack band's target diameter per unit distance beyond the band, about
         running cracks (``adapt="band"``; :mod:`ngat.band`): the default 0.42 grades it like a
@@ -337,6 +344,7 @@ class AdaptivityParameters:
     theta: float = 0.5
     marking: str = "dorfler"
     band_h: float = 0.18
+    band_search: float = 2.0
     band_grading: float = 0.42
     remesh_radius: float = 10.0
     floor: float = 0.02
@@ -361,6 +369,11 @@ class AdaptivityParameters:
             raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
         if not self.floor >= 0:
             raise ParameterError(f"floor must be non-negative, got floor={self.floor}")
+        if not 1 <= self.band_search < math.inf:
+            raise ParameterError(
+                f"band_search must be a number >= 1 (1: no coarser band while a step searches "
+                f"for its crack), got band_search={self.band_search}"
+            )
         if not 0 <= self.band_grading < math.inf:
             raise ParameterError(
                 f"band_grading must be a non-negative number, got band_grading={self.band_grading}"
@@ -526,6 +539,7 @@ class Parameters:
 
 LEGACY_VALUES: dict[str, Any] = {
     "am_stop": "change",
+    "band_search": 1.0,
     "crack_extension": False,
     "remesh_radius": 0.0,
 }

@@ -431,6 +431,7 @@ PARAMETER_LABELS = {
     "tol_rel": "relative tolerance (TOL / I^½)",
     "theta": "marking parameter θ",
     "band_h": "crack-band element size [ε]",
+    "band_search": "crack band while searching [band_h]",
     "floor": "element floor [ε]",
     "max_refinements": "refinements per step at most",
     "irreversibility": "irreversibility",

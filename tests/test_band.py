@@ -1,5 +1,7 @@
 """The crack band (adapt=band): elements tied to ε at the tips and wherever the crack goes."""
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -107,6 +109,25 @@ def test_a_running_crack_is_resolved_at_every_iteration_with_fewer_refinements(
     assert fewest <= fired <= most, fired
 
 
+def test_searching_about_the_newly_damaged_vertices_refines_as_the_full_search():
+    # After a call that refined nothing, the band searches on that mesh about the vertices
+    # damaged since and the tips only; the meshes must be those of the full search.
+    eps = 0.05
+    runs = []
+    for cached in (True, False):
+        _, state, band = two_slits_state(eps)
+        pristine = copy.copy(band)
+        for _ in range(6):
+            if not grow_crack(state, band, 2.0):
+                break
+        runs.append([])
+        for k in range(1, 21):
+            used = band if cached else copy.copy(pristine)
+            runs[-1].append((grow_crack(state, used, 2.0 + 0.2 * eps * k), state.arrays.ne))
+    assert runs[0] == runs[1]
+    assert 1 <= sum(rounds > 0 for rounds, _ in runs[0]) < 20  # both paths were taken
+
+
 def test_band_parameters_are_checked():
     with pytest.raises(ParameterError, match="band_h"):
         Parameters().replace(band_h=0.01, floor=0.02)
@@ -114,14 +135,19 @@ def test_band_parameters_are_checked():
     with pytest.raises(ParameterError, match="adapt must be one of band"):
         Parameters().replace(adapt="everywhere")
     assert Parameters().adaptivity.adapt == "band"
+    with pytest.raises(ParameterError, match="band_search must be a number >= 1"):
+        Parameters().replace(band_search=0.5)
 
 
-def test_a_crack_that_runs_through_coarse_elements_ends_resolved(tmp_path):
+@pytest.mark.parametrize("search", [1.0, 2.0])
+def test_a_crack_that_runs_through_coarse_elements_ends_resolved(tmp_path, search):
     # two-slits at ε = 0.1 from a mesh of 5ε: at t = 1.5 the two cracks run through the body
-    # and join in one load step, through elements that were 5ε wide when the step began.
+    # and join in one load step, through elements that were 5ε wide when the step began; with
+    # band_search = 2 they run on a band of twice the target, resolved once they stopped.
     scene = load_scene("two-slits")
     eps = 0.1
-    parameters, _ = scene.configure(quick=True, overrides={"eps": eps, "floor": 0.1})
+    overrides = {"eps": eps, "floor": 0.1, "band_search": search}
+    parameters, _ = scene.configure(quick=True, overrides=overrides)
     adaptivity = parameters.adaptivity
     band = CrackBand(eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps)
     result = run(scene, parameters, np.array([0.0, 1.5]), tmp_path)
