@@ -35,10 +35,10 @@ times those radii (a crack front that has crossed half of the resolved margin), 
 resolves the whole band. Without it a running crack moves the band's edge a little at every
 iteration and every iteration pays for a bisection and a rebuild of the operators.
 
-While a load step's iteration searches for its crack the target is coarser
-(:meth:`CrackBand.search`, ``band_search`` times it): a crack that runs through the body in one
-step does so on a quarter of the new elements, and the band is resolved to its target once the
-iteration has converged, after which it converges again on that mesh.
+With ``band_search`` > 1 the target is coarser while a load step's iteration searches for its
+crack (:meth:`CrackBand.search`): a crack that runs through the body in one step does so on
+fewer new elements, and the band is resolved to its target once the iteration has converged,
+after which it converges again on that mesh.
 """
 
 from __future__ import annotations
@@ -181,9 +181,10 @@ class CrackBand:
 
         Where the load step is unstable, a crack runs a whole ligament before the iteration
         settles, hundreds of iterations in which the band follows its tip. On the coarser band
-        (the default: twice the diameter, a quarter of the new elements) the crack finds its
-        path; :meth:`end_search` then resolves the band to ``band_h · ε`` and the iteration
-        converges again on that mesh, so a converged step has the same band either way.
+        (at ``band_search = 2``: twice the diameter, a quarter of the new elements) the crack
+        finds its path; :meth:`end_search` then resolves the band to ``band_h · ε`` and the
+        iteration converges again on that mesh, so a converged step has the same band either
+        way, but the path is that of the coarser band.
         Measured on the paper's example from its checkpoint at t = 1.38 (the break step):
         139 iterations and 388 linear solves against 249 and 782, 184k against 200k elements
         (three iterations after the band was resolved), total energy 3.2261 against 3.2180

@@ -14,8 +14,9 @@ Proposition 4), mark, refine, until the estimator is ≤ TOL.
 The variant ``"after"`` runs Algorithm 1 to convergence first and refines only then. The
 default ``"band"`` is Algorithm 2 with the crack band resolved after every v-step
 (:class:`ngat.band.CrackBand`): an iteration that refined the band does not count as converged.
-The band is coarser until the iteration first converges (:meth:`ngat.band.CrackBand.search`),
-then resolved to its target, and the iteration goes on to convergence on that mesh.
+With ``band_search`` > 1 the band is coarser until the iteration first converges
+(:meth:`ngat.band.CrackBand.search`), then resolved to its target, and the iteration goes on to
+convergence on that mesh.
 
 The loop is the same for every ``nonlinear`` solver, all with the same stopping test on an
 alternating-minimisation iteration; what a solver adds between the half-steps (acceleration,
