@@ -198,13 +198,11 @@ class CrackBand:
         self.target = self.resolved
         return searching
 
-    def centres(self, state: ATState) -> tuple[np.ndarray, np.ndarray]:
-        """Return the damaged vertices (v < ``DAMAGED``) and the slits' crack tips (of v)."""
-        arrays, v = state.arrays, state.v_values
-        damaged = arrays.coords[v < DAMAGED]
+    def tips(self, state: ATState) -> np.ndarray:
+        """Return the slits' crack tips (of v), one row per slit (none without slits)."""
         if not self.slits:
-            return damaged, np.empty((0, 2))
-        return damaged, np.array(crack_tips(arrays, v, self.slits))
+            return np.empty((0, 2))
+        return np.array(crack_tips(state.arrays, state.v_values, self.slits))
 
     def running(self, tips: np.ndarray) -> bool:
         """Return whether the band is graded: a crack runs (without slits: always).
@@ -230,7 +228,7 @@ class CrackBand:
         coords, elements
             Vertex coordinates and element vertex numbers of the current mesh.
         damaged, tips
-            The centres of :meth:`centres`.
+            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`).
         diameter
             The elements' diameters, if known (else computed).
         """
@@ -264,7 +262,7 @@ class CrackBand:
         coords, elements
             Vertex coordinates and element vertex numbers of the current mesh.
         centres
-            The damaged vertices and the crack tips (:meth:`centres`), stacked.
+            The damaged vertices and the crack tips (:meth:`tips`), stacked.
         diameter
             The elements' diameters, if known (else computed).
         """
@@ -299,7 +297,7 @@ class CrackBand:
             Vertex numbers of the elements :meth:`marked` returned (the trigger's reach lies
             inside the band's, so no other element can trigger).
         damaged, tips
-            The centres of :meth:`centres`.
+            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`).
         """
         diameter = element_diameters(coords, elements)
         reach = self.trigger * self.eps
@@ -334,23 +332,23 @@ class CrackBand:
         """
         arrays = state.arrays
         with state.timer("band"):
-            damaged, centres = self.centres(state)
             coords, elements = arrays.coords, arrays.elements
             is_damaged = state.v_values < DAMAGED
+            damaged, tips = coords[is_damaged], self.tips(state)
             searched = damaged
             if self._clear is not None and self._clear[:2] == (arrays, self.target):
                 searched = coords[is_damaged & ~self._clear[2]]
-            marked = self.marked(coords, elements, searched, centres, arrays.diameter)
-            triggered = self.triggered(coords, elements[marked], searched, centres)
+            marked = self.marked(coords, elements, searched, tips, arrays.diameter)
+            triggered = self.triggered(coords, elements[marked], searched, tips)
         if not triggered:
             self._clear = (arrays, self.target, is_damaged)
             return 0
         self._clear = None
         if searched is not damaged:
             with state.timer("band"):
-                marked = self.marked(coords, elements, damaged, centres, arrays.diameter)
-        graded = self.running(centres)
-        everywhere = np.concatenate([damaged, centres]) if graded else np.empty((0, 2))
+                marked = self.marked(coords, elements, damaged, tips, arrays.diameter)
+        graded = self.running(tips)
+        everywhere = np.concatenate([damaged, tips]) if graded else np.empty((0, 2))
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)
@@ -359,7 +357,7 @@ class CrackBand:
             with state.timer("band"):
                 coords, elements = mesh_geometry(state.mesh)
                 diameter = element_diameters(coords, elements)
-                marked = self.marked(coords, elements, damaged, centres, diameter)
+                marked = self.marked(coords, elements, damaged, tips, diameter)
                 marked |= self.graded(coords, elements, everywhere, diameter)
         if rounds:
             rebuild(state)
