@@ -10,6 +10,7 @@ Targets (issue 4): ≤ 60 s wall (stretch ≤ 30 s), ≥ 70 % of the time in the
 peak memory ≤ 2 GB.
 
 One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's quick variant);
+``--until T`` stops the load history at t = T (e.g. 1.35: the pre-break steps alone);
 output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time, seconds per
 timed phase, peak memory, AM iterations in total and in the growth window, linear solves,
 fracture time, E(1.0), final elements, element sizes) and ``phases.png``; the run's results
@@ -69,7 +70,13 @@ def optional(value: Callable[[], Any]) -> Any:
         return None
 
 
-def measure(quick: bool, folder: Path) -> dict:
+def variant(quick: bool, until: float | None) -> list[str]:
+    """Return the command-line words that choose the run: ``--quick``, ``--until T``."""
+    words = ["--quick"] if quick else []
+    return words if until is None else [*words, "--until", f"{until:g}"]
+
+
+def measure(quick: bool, until: float | None, folder: Path) -> dict:
     """Run two-slits with the ngat on the path and return its figures (``None``: not given)."""
     import ngat
     from ngat.driver import run
@@ -77,6 +84,8 @@ def measure(quick: bool, folder: Path) -> dict:
 
     scene = load_scene("two-slits")
     parameters, times = scene.configure(quick=quick)
+    if until is not None:
+        times = times[times <= until + 1e-12]
     begin = time.perf_counter()
     result = run(scene, parameters, times, folder)
     wall = time.perf_counter() - begin
@@ -106,7 +115,7 @@ def measure(quick: bool, folder: Path) -> dict:
     }
 
 
-def plot_phases(bench: dict, quick: bool, path: Path) -> None:
+def plot_phases(bench: dict, title: str, path: Path) -> None:
     """Draw the seconds per phase of one run as horizontal bars."""
     import matplotlib
 
@@ -117,18 +126,18 @@ def plot_phases(bench: dict, quick: bool, path: Path) -> None:
     split = bench["phases_s"]
     ax.barh(list(split), list(split.values()), color="tab:blue")
     ax.set_xlabel("wall time [s]")
-    ax.set_title(f"two-slits{' --quick' if quick else ''}: {bench['wall_s']:.1f} s wall")
+    ax.set_title(f"{title}: {bench['wall_s']:.1f} s wall")
     fig.tight_layout()
     fig.savefig(path, dpi=150)
 
 
-def bench_one(quick: bool, out: Path) -> None:
+def bench_one(quick: bool, until: float | None, out: Path) -> None:
     """Run the benchmark once in this process; write ``bench.json`` and ``phases.png``."""
-    bench = measure(quick, out / "run")
+    bench = measure(quick, until, out / "run")
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(bench, indent=2))
     print(json.dumps(bench, indent=2))
-    plot_phases(bench, quick, out / "phases.png")
+    plot_phases(bench, " ".join(["two-slits", *variant(quick, until)]), out / "phases.png")
 
 
 def git(*arguments: str) -> str:
@@ -162,10 +171,10 @@ def describe(revision: str | None) -> str:
     return f"current ({git('rev-parse', '--short', 'HEAD')}{' + changes' if edited else ''})"
 
 
-def bench_child(root: Path, quick: bool) -> dict:
+def bench_child(root: Path, words: list[str]) -> dict:
     """Return the figures of one run in a process of its own, only ``root`` on PYTHONPATH."""
     with tempfile.TemporaryDirectory(prefix="bench-run-") as tmp:
-        command = [sys.executable, str(SCRIPT), "--out", tmp, *(["--quick"] if quick else [])]
+        command = [sys.executable, str(SCRIPT), "--out", tmp, *words]
         environment = {**os.environ, "PYTHONPATH": str(root)}
         done = subprocess.run(command, env=environment, stdout=subprocess.DEVNULL, check=False)
         if done.returncode:
@@ -262,7 +271,7 @@ def table(comparison: dict) -> str:
     line("fracture time", lambda r: cell(r["fracture_time"]))
     line("E(1.0) error [%]", lambda r: cell(r["energy_error_%"], 3))
     line("peak memory [MB]", lambda r: cell(r["peak_memory_mb"], 0))
-    mode = "two-slits --quick" if comparison["quick"] else "two-slits"
+    mode = " ".join(["two-slits", *comparison["variant"]])
     return "\n".join(
         [
             f"{mode}, {comparison['repeats']} run(s) per checkout, alternating.",
@@ -279,7 +288,7 @@ def stop(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
 
 
-def compare(revision: str, repeats: int, quick: bool, out: Path) -> None:
+def compare(revision: str, repeats: int, words: list[str], out: Path) -> None:
     """Benchmark the current tree against ``revision``, alternating; write the table."""
     signal.signal(signal.SIGTERM, stop)
     labels = {"current": describe(None), "against": describe(revision)}
@@ -288,13 +297,13 @@ def compare(revision: str, repeats: int, quick: bool, out: Path) -> None:
         roots = {"current": ROOT, "against": checkout}
         for k in range(repeats):
             for name, root in roots.items():
-                runs[name].append(bench_child(root, quick))
+                runs[name].append(bench_child(root, words))
                 print(f"run {k + 1}/{repeats} {labels[name]}: {runs[name][-1]['wall_s']} s")
     phases = timed_phases(runs)
     summary = {name: summarise(benches, phases) for name, benches in runs.items()}
     comparison = {
         "against": revision,
-        "quick": quick,
+        "variant": words,
         "repeats": repeats,
         "labels": labels,
         "phases": phases,
@@ -321,11 +330,14 @@ def main() -> None:
     parser.add_argument(
         "--repeats", type=int, default=3, help="runs per checkout with --against (default 3)"
     )
+    parser.add_argument(
+        "--until", type=float, metavar="T", help="stop the load history at t = T (default: all)"
+    )
     args = parser.parse_args()
     if args.against is None:
-        bench_one(args.quick, args.out)
+        bench_one(args.quick, args.until, args.out)
     else:
-        compare(args.against, args.repeats, args.quick, args.out)
+        compare(args.against, args.repeats, variant(args.quick, args.until), args.out)
 
 
 if __name__ == "__main__":
