@@ -51,14 +51,26 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     np.ndarray
         (nv,) int labels: the component of each vertex of the set, ``-1`` outside it.
     """
-    first, second = arrays.edges.T
-    edges = arrays.edges[mask[first] & mask[second]]
+    return _components(arrays.edges, mask)
+
+
+def _components(edges: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """:func:`components` on the given edges (all edges between vertices of the set among them).
+
+    The graph has the set's vertices only, so a small set costs little beyond the mask.
+    """
+    edges = edges[mask[edges[:, 0]] & mask[edges[:, 1]]]
+    inside = np.flatnonzero(mask)
+    local = np.full(len(mask), -1, dtype=np.int64)
+    local[inside] = np.arange(len(inside))
     graph = coo_matrix(
-        (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])),
-        shape=(arrays.nv, arrays.nv),
+        (np.ones(len(edges), dtype=np.int8), (local[edges[:, 0]], local[edges[:, 1]])),
+        shape=(len(inside), len(inside)),
     )
     _, labels = connected_components(graph, directed=False)
-    return np.where(mask, labels, -1)
+    out = np.full(len(mask), -1, dtype=labels.dtype)
+    out[inside] = labels
+    return out
 
 
 def grown(tips: Sequence[tuple[float, float]], slits: Sequence[Slit], length: float) -> np.ndarray:
@@ -123,8 +135,10 @@ def crack_tips(
         One tip per slit; the slit tip itself where no crack reaches the slit.
     """
     coords, v = arrays.coords, np.asarray(v, dtype=float)
-    labels = components(arrays, v < threshold)
-    cracked = labels >= 0
+    cracked = v < threshold
+    # The edges with a cracked end: those within the crack and those leaving it.
+    edges = arrays.edges[cracked[arrays.edges[:, 0]] | cracked[arrays.edges[:, 1]]]
+    labels = _components(edges, cracked)
     tips = []
     for mouth, tip in slits:
         mouth, tip = np.asarray(mouth, dtype=float), np.asarray(tip, dtype=float)
@@ -137,27 +151,34 @@ def crack_tips(
         if not crack.any():
             tips.append((float(tip[0]), float(tip[1])))
             continue
-        candidates = np.vstack([coords[crack], _crossings(arrays, v, crack, cracked, threshold)])
+        crossings = _crossings(coords, edges, v, crack, cracked, threshold)
+        candidates = np.vstack([coords[crack], crossings])
         far = candidates[np.argmax(np.linalg.norm(candidates - mouth, axis=1))]
         tips.append((float(far[0]), float(far[1])))
     return tips
 
 
 def _crossings(
-    arrays: MeshArrays, v: np.ndarray, crack: np.ndarray, cracked: np.ndarray, threshold: float
+    coords: np.ndarray,
+    edges: np.ndarray,
+    v: np.ndarray,
+    crack: np.ndarray,
+    cracked: np.ndarray,
+    threshold: float,
 ) -> np.ndarray:
     """Return the points where v_h = threshold on the edges from ``crack`` to sound vertices.
 
     With the crack vertices these are the corners of the crack's part of {v_h < threshold}
-    (v_h the P1 interpolant), so its farthest point from the mouth is one of them.
+    (v_h the P1 interpolant), so its farthest point from the mouth is one of them. ``edges``
+    holds at least every edge with an end in ``crack``.
     """
-    first, second = arrays.edges.T
+    first, second = edges.T
     inner = np.where(crack[first], first, second)
     outer = np.where(crack[first], second, first)
     leaving = (crack[first] != crack[second]) & ~cracked[outer]
     inner, outer = inner[leaving], outer[leaving]
     s = (threshold - v[inner]) / (v[outer] - v[inner])
-    return arrays.coords[inner] + s[:, None] * (arrays.coords[outer] - arrays.coords[inner])
+    return coords[inner] + s[:, None] * (coords[outer] - coords[inner])
 
 
 def connects(
