@@ -208,24 +208,38 @@ class HalfStepSolvers:
             Boolean DOF mask of CR(t_k), where v is fixed to 0.
         """
         state, operators = self.state, self.operators
+        # The direct solver factorises b_j on all DOFs with CR decoupled (identity-like rows):
+        # its ordering serves every v-step on the mesh however CR grows.
+        direct = self.linear_solver == "direct"
         with state.timer("assembly"):
-            operators.assemble_b()
+            operators.assemble_b(crack if direct else None)
             state.v_values[crack] = 0.0
         with state.timer("solve"):
             free = ~crack
-            self._b_solver = self._refreshed(self._b_solver, "v", free)
-            self._v_correction(self._b_solver)
+            factorised = np.ones_like(free) if direct else free
+            self._b_solver = self._refreshed(self._b_solver, "v", factorised)
+            self._v_correction(self._b_solver, crack)
             if state.model.irreversibility == "pointwise":
                 upper = state.v_prev.vec.FV().NumPy().copy()
                 self._bound_active = self._enforce_bounds(free, upper)
             elif self.bounded_v:
                 self._bound_active = self._enforce_bounds(free, 1.0)
 
-    def _v_correction(self, solver: LaggedCholesky | AMGConjugateGradient) -> None:
-        """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2)."""
+    def _v_correction(
+        self,
+        solver: LaggedCholesky | AMGConjugateGradient | HeldCholesky,
+        fixed: np.ndarray | None = None,
+    ) -> None:
+        """Add the solution of B δ = f m − B v on the solver's free DOFs to v (f = α for AT2).
+
+        ``fixed``: DOFs the solver factorised though v stays there (CR, decoupled in B); the
+        right-hand side is 0 on them, and so is δ.
+        """
         state = self.state
         self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
         self._v_residual.data -= self._operators.b_matrix * state.v.vec
+        if fixed is not None:
+            self._v_residual.FV().NumPy()[fixed] = 0.0
         self._solve(solver, "v")
         state.v.vec.data += self._v_step
 
@@ -252,7 +266,7 @@ class HalfStepSolvers:
                 self._b_solver = self._refreshed(self._b_solver, "v", inactive)
                 self._v_correction(self._b_solver)
             elif (free & ~inactive).sum() <= HeldCholesky.MAX_HELD:
-                self._v_correction(HeldCholesky(self._b_solver, inactive))
+                self._v_correction(HeldCholesky(self._b_solver, inactive, decoupled=~free))
             else:
                 self._v_correction(LaggedCholesky(self._operators.b_matrix, inactive, 0))
             self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass

@@ -108,16 +108,22 @@ class HeldCholesky:
         The factorisation of A on F (refactorised first if its values are stale).
     free
         The free DOFs I, a subset of ``base.free``.
+    decoupled
+        DOFs of F whose rows and columns of A hold the diagonal only (the v-step's crack
+        set): with the right-hand side 0 there the solution is 0 there, nothing to hold.
     """
 
     MAX_HELD = 10
     """Most held DOFs worth |S| back-substitutions instead of a new factorisation."""
 
-    def __init__(self, base: LaggedCholesky, free: np.ndarray):
+    def __init__(self, base: LaggedCholesky, free: np.ndarray, decoupled: np.ndarray | None = None):
         base.refresh()
         self.base = base
         self.free = free.copy()
-        self.held = np.flatnonzero(base.free & ~free)
+        held = base.free & ~free
+        if decoupled is not None:
+            held &= ~decoupled
+        self.held = np.flatnonzero(held)
         self._rhs = base.matrix.CreateColVector()
         self._out = base.matrix.CreateColVector()
         columns = []

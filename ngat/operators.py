@@ -15,6 +15,8 @@ refinement.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ngat.forms import LumpedAssembler, a_form, b_form
@@ -87,16 +89,29 @@ class LumpedOperators:
         """Write a_j(v; ·, ·) at the current fields into ``a_matrix``, in place."""
         self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
 
-    def assemble_b(self) -> None:
+    def assemble_b(self, crack: np.ndarray | None = None) -> None:
         """Write b_j(u; ·, ·) at the current u into ``b_matrix``, in place.
 
         b_j of Definition 2 with W⁺(u)/G_c in place of |∇u|² and the model's crack density
-        (:mod:`ngat.crack_density`).
+        (:mod:`ngat.crack_density`). With ``crack`` (the DOFs of CR(t_k), where the v-step
+        fixes v = 0) their couplings are left out: their rows and columns hold the diagonal
+        only, and a factorisation of the matrix on all DOFs solves the v-step with v fixed
+        there, whatever CR is (one ordering per mesh, :class:`ngat.linear.LaggedCholesky`).
         """
         state = self.state
         density = state.functional.v_step_density(self.arrays, state.u_values)
         values = self.b_assembler.b_values(density, state.model.surface)
+        if crack is not None and crack.any():
+            rows, columns = self._b_entries
+            values[(crack[rows] | crack[columns]) & (rows != columns)] = 0.0
         self.b_matrix.AsVector().FV().NumPy()[:] = values
+
+    @functools.cached_property
+    def _b_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column of each stored entry of ``b_matrix``."""
+        _, columns, rowptr = self.b_matrix.CSR()
+        counts = np.diff(np.asarray(rowptr, dtype=np.int64))
+        return np.repeat(np.arange(len(counts)), counts), np.asarray(columns, dtype=np.int64)
 
     def reaction_forces(self) -> dict[str, float]:
         """Return the reaction force on each Dirichlet region and the load's conjugate force.

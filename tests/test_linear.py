@@ -179,3 +179,65 @@ def test_held_cholesky_solves_the_subset_exactly(bounded):
     LaggedCholesky(operators.b_matrix, free, max_cg=0).solve(rhs, expected)
     HeldCholesky(base, free).solve(rhs, found)
     assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-12 * scale
+
+
+def test_v_step_with_the_crack_decoupled_keeps_one_factorisation_per_mesh():
+    """CR grows on the same mesh: the direct v-step keeps its factorisation (CR's rows and
+    columns of b_j hold the diagonal only) and solves as a factorisation on the DOFs off CR."""
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"eps": 0.2})
+    state = ATState(scene.make_mesh(0.25), parameters.model, scene.loads, scene.crack)
+    steps = HalfStepSolvers(state, max_cg=0, bounded_v=False)
+    state.apply_load(1.4)
+    steps.solve_u()
+    crack = np.zeros(state.arrays.nv, dtype=bool)
+    crack[np.argsort(np.linalg.norm(state.arrays.coords - (2.0, 2.0), axis=1))[:40]] = True
+    smaller = crack.copy()
+    smaller[np.flatnonzero(crack)[::2]] = False
+    steps.solve_v(smaller)
+    solver = steps._b_solver
+    u_before, v_start = state.u_values.copy(), state.v_values.copy()
+    steps.solve_v(crack)
+    assert steps._b_solver is solver and solver.free.all()
+    assert np.all(state.v_values[crack] == 0.0)
+    # The same v-step by a factorisation of the undecoupled b_j on the DOFs off CR.
+    found = state.v_values.copy()
+    state.v_values[:] = v_start
+    state.v_values[crack] = 0.0
+    operators = LumpedOperators(state)
+    operators.assemble_b()
+    residual, step = operators.b_matrix.CreateColVector(), operators.b_matrix.CreateColVector()
+    residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
+    residual.data -= operators.b_matrix * state.v.vec
+    LaggedCholesky(operators.b_matrix, ~crack, max_cg=0).solve(residual, step)
+    expected = state.v_values + step.FV().NumPy()
+    assert np.array_equal(state.u_values, u_before)
+    assert np.abs(found - expected).max() <= 1e-10
+
+
+def test_held_cholesky_does_not_hold_the_decoupled_crack():
+    """The bounded v-step's few active DOFs off CR, on the factorisation with CR decoupled: only
+    they are held, and the solution is that of a factorisation of their own."""
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"eps": 0.2})
+    state = ATState(scene.make_mesh(0.25), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.4)
+    HalfStepSolvers(state).solve_u()
+    crack = np.zeros(state.arrays.nv, dtype=bool)
+    crack[np.argsort(np.linalg.norm(state.arrays.coords - (2.0, 2.0), axis=1))[:40]] = True
+    operators = LumpedOperators(state)
+    operators.assemble_b(crack)
+    base = LaggedCholesky(operators.b_matrix, np.ones_like(crack), max_cg=0)
+    rng = np.random.default_rng(1)
+    active = rng.choice(np.flatnonzero(~crack), size=HeldCholesky.MAX_HELD, replace=False)
+    inactive = ~crack
+    inactive[active] = False
+    held = HeldCholesky(base, inactive, decoupled=crack)
+    assert sorted(held.held) == sorted(active)
+    rhs, found = operators.b_matrix.CreateColVector(), operators.b_matrix.CreateColVector()
+    rhs.FV().NumPy()[:] = rng.standard_normal(len(crack))
+    held.solve(rhs, found)
+    expected = operators.b_matrix.CreateColVector()
+    LaggedCholesky(operators.b_matrix, inactive, max_cg=0).solve(rhs, expected)
+    scale = np.abs(expected.FV().NumPy()).max()
+    assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-10 * scale
