@@ -63,6 +63,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+FIELDS = ("u", "v", "v_prev", "v_change")
+"""The fields a checkpoint keeps: u, v, v(t_{k−1}) and v(t_{k−1}) − v(t_{k−2}) (the
+predictor's, :func:`ngat.minimization.predict_v`; older checkpoints have no ``v_change``)."""
+
 CARRIED = ("timing", "fracture_time", "refinement_history", "resumed_after_step", "diagnostics")
 """The summary entries gathered during the steps that the checkpoint keeps for a resumed run.
 
@@ -85,7 +89,7 @@ class Checkpoint:
     summary
         The summary entries of :data:`CARRIED` the run has.
     fields
-        ``u``, ``v``, ``v_prev``: nodal values.
+        ``u``, ``v``, ``v_prev``, ``v_change``: nodal values (:data:`FIELDS`).
     refinements
         The mesh's changes in order: marked element indices of a refinement, or a re-meshed
         region (:class:`ngat.remesh.Patch`).
@@ -151,6 +155,7 @@ def save_checkpoint(
         "u": state.u_values,
         "v": state.v_values,
         "v_prev": state.v_prev.vec.FV().NumPy(),
+        "v_change": state.v_change.vec.FV().NumPy(),
         "coords": state.mesh.ngmesh.Coordinates(),
         "marks": np.concatenate(marks) if marks else np.zeros(0, dtype=np.int64),
         "mark_offsets": np.cumsum([0, *(len(m) for m in marks)]),
@@ -242,7 +247,7 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
                 step=meta["step"],
                 identity=meta["identity"],
                 summary={key: meta["summary"][key] for key in CARRIED if key in meta["summary"]},
-                fields={key: data[key] for key in ("u", "v", "v_prev")},
+                fields={key: data[key] for key in FIELDS if key in data.files},
                 refinements=with_patches(refinements, data),
                 coords=data["coords"],
                 solvers=solvers,
@@ -355,10 +360,16 @@ def replay_refinements(mesh: ngsolve.Mesh, checkpoint: Checkpoint) -> ngsolve.Me
 
 
 def restore_state(state: ATState, half_steps: HalfStepSolvers, checkpoint: Checkpoint) -> None:
-    """Set u, v, v(t_{k−1}), the refinement list and the factorisations from the checkpoint."""
+    """Set u, v, v(t_{k−1}), its last change, the refinement list and the factorisations.
+
+    A checkpoint written before the predictor (:func:`ngat.minimization.predict_v`) has no
+    ``v_change``: 0, so the next step starts from v(t_{k−1}).
+    """
     state.u_values[:] = checkpoint.fields["u"]
     state.v_values[:] = checkpoint.fields["v"]
     state.v_prev.vec.FV().NumPy()[:] = checkpoint.fields["v_prev"]
+    if "v_change" in checkpoint.fields:
+        state.v_change.vec.FV().NumPy()[:] = checkpoint.fields["v_change"]
     state.refinements[:] = [
         m if isinstance(m, Patch) else np.asarray(m) for m in checkpoint.refinements
     ]

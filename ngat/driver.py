@@ -39,7 +39,13 @@ from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.extension import CrackExtension
 from ngat.halfsteps import HalfStepSolvers
 from ngat.lock import folder_lock
-from ngat.minimization import ConvergenceError, HalfStepMonitor, alternating_minimization, estimate
+from ngat.minimization import (
+    ConvergenceError,
+    HalfStepMonitor,
+    alternating_minimization,
+    estimate,
+    predict_v,
+)
 from ngat.output import OutputError, ResultsWriter, vtu_name
 from ngat.parameters import Parameters
 from ngat.remesh import TipRemesher
@@ -240,6 +246,8 @@ def _run_locked(
             state.apply_load(float(t))
             remeshed = remesher.remesh(state) if remesher else 0
             predicted = band.refine(state) if band else 0
+            if solver.predictor and k >= 2:
+                predict_v(state, (t - times[k - 1]) / (times[k - 1] - times[k - 2]))
             try:
                 step = alternating_minimization(
                     state,
@@ -285,6 +293,7 @@ def _run_locked(
                 state, step, parameters.model.eps, k, float(t), raise_now=False
             )
             record["warnings"] = " ".join(problems)
+            state.v_change.vec.data = state.v.vec - state.v_prev.vec
             state.v_prev.vec.data = state.v.vec
             record["wall_s"] = round(time.perf_counter() - begin, 4)
             fields = {"u": state.u, "v": state.v} if output.writes_fields(k, len(times)) else None

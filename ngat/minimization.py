@@ -49,6 +49,8 @@ __all__ = [
     "estimate",
     "ConvergenceError",
     "load_bearing_change",
+    "predict_v",
+    "PREDICTOR_MAX",
     "tolerance",
 ]
 
@@ -268,6 +270,43 @@ def _stopping_error(change: float, previous: float, moved: float, am_stop: str) 
     if am_stop == "change":
         return change
     return max(estimated_error(change, previous), moved)
+
+
+PREDICTOR_MAX = 0.025
+"""Largest change of v in the last load step, ‖v(t_{k−1}) − v(t_{k−2})‖_∞, after which the
+next step is still started from the extrapolation (:func:`predict_v`): a larger one is a crack
+that grew or jumped, not a trend to follow. On the paper's example (Δt = 0.01) the change is
+0.003–0.02 per step up to t = 1.25, 0.03–0.11 once the cracks leave their slits."""
+
+
+def predict_v(state: ATState, ratio: float) -> bool:
+    """Start the load step from v(t_{k−1}) + ratio · (v(t_{k−1}) − v(t_{k−2})); return whether.
+
+    Alternating minimisation (Algorithm 1) starts from v(t_{k−1}); while v follows the load
+    smoothly, its linear extrapolation is O(Δt²) from the step's solution instead of O(Δt), and
+    the first iteration's change already passes the stopping test (measured on the paper's
+    example up to t = 1.3: 127 of 131 load steps in one iteration, 299 linear solves instead
+    of 677, E(1.0) equal to 7e−8). The prediction is clipped to the admissible set (0 ≤ v ≤ 1,
+    or ≤ v(t_{k−1}) with pointwise irreversibility); v = 0 on CR(t_k) is set by the loop.
+    Nothing is done after a step whose change exceeded :data:`PREDICTOR_MAX`.
+
+    Parameters
+    ----------
+    state
+        Fields on the current mesh: ``v`` = ``v_prev`` = v(t_{k−1}) and ``v_change`` =
+        v(t_{k−1}) − v(t_{k−2}), prolongated with them.
+    ratio
+        (t_k − t_{k−1}) / (t_{k−1} − t_{k−2}).
+    """
+    change = state.v_change.vec.FV().NumPy()
+    largest = float(np.abs(change).max()) if len(change) else 0.0
+    if largest == 0.0 or largest > PREDICTOR_MAX:
+        return False
+    upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
+    v = state.v_values
+    v += ratio * change
+    np.clip(v, 0.0, upper, out=v)
+    return True
 
 
 def alternating_minimization(

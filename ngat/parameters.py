@@ -223,6 +223,11 @@ class SolverParameters:
         scene's slits (the tips are those of their cracks).
     bounded_v
         Minimise the v-step over 0 ≤ v ≤ 1 (see :meth:`ngat.halfsteps.HalfStepSolvers.solve_v`).
+    predictor
+        Start a load step from v extrapolated linearly from the last two load steps
+        (:func:`ngat.minimization.predict_v`; not after a step that moved v by more than
+        :data:`ngat.minimization.PREDICTOR_MAX` = 0.025 anywhere: a crack grew); ``False``:
+        from v(t_{k−1}) (the paper).
     on_problem
         ``"warn"``: problems found by :mod:`ngat.diagnostics` are logged and recorded;
         ``"error"``: the run stops at the first one.
@@ -239,6 +244,7 @@ class SolverParameters:
     newton_switch: float = 0.1
     crack_extension: bool = False
     bounded_v: bool = True
+    predictor: bool = True
     on_problem: str = "warn"
 
     def check(self) -> None:
@@ -545,6 +551,7 @@ LEGACY_VALUES: dict[str, Any] = {
     "am_stop": "change",
     "band_search": 1.0,
     "crack_extension": False,
+    "predictor": False,
     "remesh_radius": 0.0,
 }
 """What the package did in place of a parameter before it existed: a run folder recorded then

@@ -389,7 +389,7 @@ class TipRemesher:
 
 
 def apply_patch(state: ATState, patch: Patch) -> None:
-    """Replace the state's mesh by :func:`splice` and carry u, v and v(t_{k−1}) over.
+    """Replace the state's mesh by :func:`splice`; carry u, v, v(t_{k−1}) and its change over.
 
     The kept vertices keep their values, the patch's points take the P1 fields' values there.
     """
@@ -398,7 +398,7 @@ def apply_patch(state: ATState, patch: Patch) -> None:
     kept = old_vertex >= 0
     points = state.mesh(patch.points[:, 0], patch.points[:, 1])
     values = {}
-    for name in ("u", "v", "v_prev"):
+    for name in ("u", "v", "v_prev", "v_change"):
         field = getattr(state, name)
         old = field.vec.FV().NumPy().reshape(field.dim, -1)
         new = np.empty((field.dim, len(old_vertex)))

@@ -100,6 +100,7 @@ class ATState:
         self.v = GridFunction(self.fes, autoupdate=True)
         self.v_prev = GridFunction(self.fes, autoupdate=True)
         self.v_iter = GridFunction(self.fes, autoupdate=True)
+        self.v_change = GridFunction(self.fes, autoupdate=True)
 
     def replace_mesh(self, mesh: ngsolve.Mesh, values: Mapping[str, np.ndarray]) -> None:
         """Move to another mesh of the same domain (:mod:`ngat.remesh`).
