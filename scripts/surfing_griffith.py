@@ -343,6 +343,15 @@ def main() -> None:
         "contraction; change: the paper's, which stops a creeping crack early)",
     )  # fmt: skip
     parser.add_argument(
+        "--onset-only", action="store_true",
+        help="run the critical-amplitude ramp (a) only, not the steady propagation (b)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--span", type=float, nargs=2, default=(0.88, 1.12), metavar=("LOW", "HIGH"),
+        help="range of A^2 / G_eff of the ramp (a)",
+    )  # fmt: skip
+    parser.add_argument("--onset-steps", type=int, default=25, help="load steps of (a)")
+    parser.add_argument(
         "--set", action="append", default=[], metavar="NAME=VALUE",
         help="change a parameter of the runs, e.g. --set remesh_radius=10 --set band_h=0.18",
     )  # fmt: skip
@@ -369,25 +378,30 @@ def main() -> None:
             tag += f"_{args.am_stop}"
         options.update(settings)
         tag += "".join(f"_{name}{value}" for name, value in settings.items())
-        a = critical_amplitude(eps, h, args.out / f"critical_{tag}", **options)
-        b = steady_propagation(
-            eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
-        )
-        rows.append(
-            {"R_over_eps": ratio, "mesh": "structured" if h else "adaptive",
-             "h_over_eps (a)": round(a["h"] / eps, 4), "h_over_eps (b)": round(b["h"] / eps, 4),
-             "elements (a)": a["elements"], "elements (b)": b["elements"],
-             "g_eff": round(a["g_eff"], 5),
-             "a_c_sq_over_g_eff": round(a["ratio"], 4),
-             "j_c_over_g_eff": round(a["j_ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
-             "speed_over_V": round(b["speed_ratio"], 4),
-             "toughness_over_g_eff": round(b["toughness_ratio"], 4),
-             "stick_slip": round(b["stick_slip"], 3),
-             "tip_g_drift": round(b["tip_g_drift"], 4),
-             "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
-             "eta": args.eta, "am_stop": args.am_stop, **settings,
-             "steps": args.steps, "skip": args.skip}
+        a = critical_amplitude(
+            eps, h, args.out / f"critical_{tag}", span=tuple(args.span), steps=args.onset_steps,
+            **options,
         )  # fmt: skip
+        row = {
+            "R_over_eps": ratio, "mesh": "structured" if h else "adaptive",
+            "h_over_eps (a)": round(a["h"] / eps, 4), "elements (a)": a["elements"],
+            "g_eff": round(a["g_eff"], 5), "a_c_sq_over_g_eff": round(a["ratio"], 4),
+            "j_c_over_g_eff": round(a["j_ratio"], 4), "critical_wall_s": round(a["wall_s"], 1),
+        }  # fmt: skip
+        if not args.onset_only:
+            b = steady_propagation(
+                eps, h, args.out / f"steady_{tag}", steps=args.steps, skip=args.skip, **options
+            )
+            row.update(
+                {"h_over_eps (b)": round(b["h"] / eps, 4), "elements (b)": b["elements"],
+                 "speed_over_V": round(b["speed_ratio"], 4),
+                 "toughness_over_g_eff": round(b["toughness_ratio"], 4),
+                 "stick_slip": round(b["stick_slip"], 3),
+                 "tip_g_drift": round(b["tip_g_drift"], 4),
+                 "lead": round(b["lead"], 4), "steady_wall_s": round(b["wall_s"], 1),
+                 "steps": args.steps, "skip": args.skip}
+            )  # fmt: skip
+        rows.append({**row, "eta": args.eta, "am_stop": args.am_stop, **settings})
         print(rows[-1], flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "griffith.csv", "w", newline="") as f:
