@@ -181,6 +181,21 @@ def test_mode_i_crack_grows_from_a_phase_field_precrack_at_g_eff(tmp_path):
     assert rates[first - 1] < 1.03 and rates[first] > 0.97, rates[first - 1 : first + 1]
 
 
+def test_short_precrack_holds_v_only_on_the_end_of_the_slit():
+    # A pre-crack of length ℓ: v = 0 on [a₀ − ℓ, a₀] × {0} only (both faces, the tip
+    # included), so that the crack band follows the tip and not the whole slit.
+    coords = np.array(
+        [[0.0, 0.0], [0.3, 0.0], [0.58, 0.0], [0.59, 0.0], [0.6, 0.0], [0.61, 0.0], [0.595, 1e-3]]
+    )
+    a0 = surfing_mode_i.CRACK_LENGTH
+    assert a0 == 0.6
+    whole = surfing_mode_i.make_scene(precrack=True).crack(coords)
+    short = surfing_mode_i.make_scene(precrack=0.015).crack(coords)
+    assert whole.tolist() == [True, True, True, True, True, False, False]
+    assert short.tolist() == [False, False, False, True, True, False, False]
+    assert surfing_mode_i.make_scene().crack is None
+
+
 def test_discrete_release_rate_of_the_tip_field_is_a_squared():
     # v ≡ 1 and u the discrete solution under U on the frame, crack tip at the field's: the
     # domain J-integral of the discrete energy is Griffith's G = A² (U solves the problem;
