@@ -19,6 +19,13 @@ peak, so the scene turns on the crack extension (``crack_extension``, :mod:`ngat
 its path is straight by symmetry, which a straight jump follows. Measured side by side
 (docs/plane-elasticity.md): the break step in 43 iterations instead of 447 and the run 4.5×
 faster, with the same peak force and the broken state's energy 0.3 % higher.
+
+The crack band stays at ε/4 and is not graded into the body (``band_h = 0.25``,
+``band_grading = 0``): the finer graded band of the defaults keeps a crack that runs under a
+moving load at its speed (``surfing``), which this benchmark (peak force, straight path) does
+not measure, and it doubles the broken body's elements. On the 2-core machine (the two runs
+overlapping for four minutes): 261 s and 181,514 elements against 698 s and 385,742 with the
+defaults, the same peak (0.718 kN).
 """
 
 from __future__ import annotations
@@ -68,6 +75,8 @@ scene = Scene(
         "eps": LENGTH_SCALE / 2,
         "maxh": 0.05,
         "crack_extension": True,
+        "band_h": 0.25,
+        "band_grading": 0.0,
     },
     quick={"eps": 0.015 / 2, "band_h": 0.35, "floor": 0.08},
 )
