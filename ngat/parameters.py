@@ -188,7 +188,10 @@ class SolverParameters:
         0 inside an opening crack does not hold it; ``"change"``: ‖v^n − v^{n−1}‖_∞ itself
         (the paper, Algorithm 1).
     am_max_iter
-        Iteration limit per load step.
+        Iteration limit per load step; 0 (default): ten iterations per ε of the body's diameter,
+        at least 1000 (:func:`ngat.minimization.iteration_limit`): a crack that runs through
+        the body within one load step moves its tip by 0.1–0.15ε per iteration, so the number
+        of iterations such a step needs grows as 1/ε.
     max_cg
         CG iterations accepted with a stale Cholesky factor as preconditioner before the
         factor is refreshed (:class:`ngat.linear.LaggedCholesky`); 0: refactorise every solve.
@@ -235,7 +238,7 @@ class SolverParameters:
 
     am_tol: float = 1e-3
     am_stop: str = "contraction"
-    am_max_iter: int = 1000
+    am_max_iter: int = 0
     max_cg: int = 0
     linear_solver: str = "direct"
     nonlinear: str = "newton"
@@ -255,8 +258,11 @@ class SolverParameters:
             raise ParameterError(
                 f"am_stop must be one of {', '.join(AM_STOPS)}, got {self.am_stop!r}"
             )
-        if not self.am_max_iter >= 1:
-            raise ParameterError(f"am_max_iter must be >= 1, got am_max_iter={self.am_max_iter}")
+        if not self.am_max_iter >= 0:
+            raise ParameterError(
+                "am_max_iter must be >= 1 (or 0: scaled with ε), "
+                f"got am_max_iter={self.am_max_iter}"
+            )
         if self.linear_solver not in ("direct", "cg-h1amg"):
             raise ParameterError(
                 f"linear_solver must be direct or cg-h1amg, got {self.linear_solver!r}"

@@ -9,9 +9,10 @@ from ngat.diagnostics import ProblemError
 from ngat.driver import run
 from ngat.geometries.obtuse_line import scene as OBTUSE
 from ngat.halfsteps import HalfStepSolvers
-from ngat.minimization import ConvergenceError
+from ngat.minimization import ConvergenceError, iteration_limit
 from ngat.parameters import ParameterError
 from ngat.scene import load_scene
+from ngat.state import ATState
 
 
 def problems(folder):
@@ -77,6 +78,20 @@ def test_not_converged(tmp_path):
     assert "not-converged" in result.records[-1]["warnings"]
     message = result.summary["diagnostics"][0]["message"]
     assert "(2 iterations)" in message and "--set am_max_iter=4" in message
+
+
+def test_default_iteration_limit_grows_as_one_over_eps():
+    # Ten iterations per ε of the bounding box's diagonal, sqrt(7² + 6²) = 9.22, at least 1000.
+    scene = load_scene("two-slits")
+    mesh = scene.make_mesh(0.5)
+    limits = {}
+    for eps in (0.5, 0.05, 0.0125):
+        parameters, _ = scene.configure(overrides={"eps": eps})
+        state = ATState(mesh, parameters.model, scene.loads, scene.crack)
+        limits[eps] = iteration_limit(state, parameters.solver)
+    assert limits == {0.5: 1000, 0.05: 1844, 0.0125: 7376}
+    parameters, _ = scene.configure(overrides={"eps": 0.0125, "am_max_iter": 30})
+    assert iteration_limit(state, parameters.solver) == 30
 
 
 def test_eps_under_resolved(tmp_path):
