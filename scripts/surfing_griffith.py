@@ -376,10 +376,11 @@ def main() -> None:
         tag = f"R{ratio:g}_h{h_over_eps:g}" if h else f"R{ratio:g}_adaptive"
         tag += "" if args.mode == "iii" else "_mode_i"
         precrack = args.precrack
-        if precrack and args.precrack_length:
+        if args.precrack and args.precrack_length:
+            tag += f"_precrack{args.precrack_length:g}"
             precrack = args.precrack_length * eps
-        tag += "_precrack" if args.precrack else ""
-        tag += f"{args.precrack_length:g}" if args.precrack and args.precrack_length else ""
+        elif args.precrack:
+            tag += "_precrack"
         options = {"mode": args.mode, "precrack": precrack}
         if args.eta is not None:
             options["eta"] = args.eta
