@@ -174,7 +174,7 @@ class CrackBand:
         self.slits = list(slits)
         self.trigger = trigger
         self.grading = grading
-        self._clear: tuple | None = None
+        self._clear: dict[float, tuple] = {}  # target → (mesh arrays, damaged mask) found clear
 
     def search(self) -> None:
         """Resolve the band to the coarser target of a step's search for its crack.
@@ -312,7 +312,9 @@ class CrackBand:
         Nothing is done unless a coarse element lies within ``trigger`` times the band's radii
         (the grading, if any, is refined along with the band)
         (hysteresis, see the module docstring). After a call that did nothing, the next call
-        on the same mesh searches about the vertices damaged since and the tips only: the
+        on the same mesh with the same target (each of the search's and the resolved one:
+        a load step alternates them) searches about the vertices damaged since and the tips
+        only: the
         trigger's reach about the union of two vertex sets is the union of their reaches, and
         the vertices damaged then had no coarse element within it (the search about all damaged
         vertices after every v-step cost 0.17 s at 200k elements). The centres (damaged
@@ -336,14 +338,15 @@ class CrackBand:
             is_damaged = state.v_values < DAMAGED
             damaged, tips = coords[is_damaged], self.tips(state)
             searched = damaged
-            if self._clear is not None and self._clear[:2] == (arrays, self.target):
-                searched = coords[is_damaged & ~self._clear[2]]
+            clear = self._clear.get(self.target)
+            if clear is not None and clear[0] is arrays:
+                searched = coords[is_damaged & ~clear[1]]
             marked = self.marked(coords, elements, searched, tips, arrays.diameter)
             triggered = self.triggered(coords, elements[marked], searched, tips)
         if not triggered:
-            self._clear = (arrays, self.target, is_damaged)
+            self._clear[self.target] = (arrays, is_damaged)
             return 0
-        self._clear = None
+        self._clear = {}
         if searched is not damaged:
             with state.timer("band"):
                 marked = self.marked(coords, elements, damaged, tips, arrays.diameter)

@@ -317,13 +317,23 @@ class TipRemesher:
             native |= distance < patch.radius - 2 * self.eps
         return native
 
-    def _allowed(self, state: ATState) -> np.ndarray:
-        """Return the elements a re-meshing may replace (see the module docstring)."""
+    def _allowed(self, state: ATState, among: np.ndarray | None = None) -> np.ndarray:
+        """Return the elements a re-meshing may replace (see the module docstring).
+
+        ``among``: a mask of the elements to check (the rest are returned as not allowed):
+        the test against every earlier re-meshing's disc costs one distance per element and
+        patch, 0.15 s per tip and load step at 180k elements and twenty patches.
+        """
         arrays = state.arrays
+        candidates = np.arange(arrays.ne) if among is None else np.flatnonzero(among)
+        elements = arrays.elements[candidates]
         damaged = (state.v_values < DAMAGED) | (state.v_prev.vec.FV().NumPy() < DAMAGED)
         fixed = state.dirichlet_vertices | state.boundary_vertices | damaged | state.initial_crack
-        allowed = ~fixed[arrays.elements].any(axis=1)
-        return allowed & ~self._native(state, arrays.coords[arrays.elements].mean(axis=1))
+        allowed = np.zeros(arrays.ne, dtype=bool)
+        kept = ~fixed[elements].any(axis=1)
+        kept[kept] = ~self._native(state, arrays.coords[elements[kept]].mean(axis=1))
+        allowed[candidates] = kept
+        return allowed
 
     def remesh(self, state: ATState) -> int:
         """Re-mesh about every running crack tip whose disc holds elements no re-meshing made.
@@ -349,7 +359,7 @@ class TipRemesher:
             centroid = arrays.coords[arrays.elements].mean(axis=1)
             distance = np.linalg.norm(centroid - tip, axis=1) - arrays.diameter
             close = distance < TRIGGER * self.radius
-            if not (close & self._allowed(state)).any():
+            if not self._allowed(state, close).any():
                 return False
             h = self.eps
             for _ in range(MAX_ROUNDS):
