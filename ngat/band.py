@@ -49,7 +49,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ngat.crack import GROWN, Slit, crack_tips, grown
+from ngat.crack import GROWN, Slit, grown, tips_of
 from ngat.forms import element_diameters
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
@@ -202,7 +202,7 @@ class CrackBand:
         """Return the slits' crack tips (of v), one row per slit (none without slits)."""
         if not self.slits:
             return np.empty((0, 2))
-        return np.array(crack_tips(state.arrays, state.v_values, self.slits))
+        return np.array(tips_of(state, self.slits))
 
     def running(self, tips: np.ndarray) -> bool:
         """Return whether the band is graded: a crack runs (without slits: always).

@@ -25,15 +25,23 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ngat.forms import MeshArrays, mesh_edges
-from ngat.state import SceneError
+from ngat.state import ATState, SceneError
 
-__all__ = ["Slit", "mesh_edges", "components", "crack_tips", "connects", "check_slits"]
+__all__ = [
+    "Slit",
+    "mesh_edges",
+    "components",
+    "crack_tips",
+    "tips_of",
+    "connects",
+    "check_slits",
+]
 
 Slit = tuple[tuple[float, float], tuple[float, float]]
+"""A slit as a segment ``((x_mouth, y_mouth), (x_tip, y_tip))``."""
 GROWN = 1.0
 """Growth from its slit's tip, in units of ε, from which a crack counts as running
 (:func:`grown`): the crack band is graded and the tip re-meshed only about running cracks."""
-"""A slit as a segment ``((x_mouth, y_mouth), (x_tip, y_tip))``."""
 
 
 def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
@@ -156,6 +164,16 @@ def crack_tips(
         far = candidates[np.argmax(np.linalg.norm(candidates - mouth, axis=1))]
         tips.append((float(far[0]), float(far[1])))
     return tips
+
+
+def tips_of(state: ATState, slits: Sequence[Slit]) -> list[tuple[float, float]]:
+    """Return :func:`crack_tips` of the state's v, measured once per mesh and v.
+
+    The crack band, the re-mesher and a step's record each ask for the tips of the same v
+    (:meth:`ngat.state.ATState.of_v`).
+    """
+    key = ("crack_tips", tuple((tuple(mouth), tuple(tip)) for mouth, tip in slits))
+    return state.of_v(key, lambda: crack_tips(state.arrays, state.v_values, slits))
 
 
 def _crossings(

@@ -34,7 +34,7 @@ from ngat.checkpoint import (
     restore_state,
     save_checkpoint,
 )
-from ngat.crack import check_slits, connects, crack_tips
+from ngat.crack import check_slits, connects, tips_of
 from ngat.diagnostics import Diagnostics, check_fixed_mesh
 from ngat.extension import CrackExtension
 from ngat.halfsteps import HalfStepSolvers
@@ -74,7 +74,7 @@ def versions() -> dict[str, str]:
 def crack_measures(state: ATState, scene: Scene) -> dict[str, Any]:
     """Return the tip of each slit's crack and whether {v ≥ 0.1} connects the Ω_D regions."""
     measures: dict[str, Any] = {}
-    tips = crack_tips(state.arrays, state.v_values, scene.slits)
+    tips = tips_of(state, scene.slits)
     for i, (x, y) in enumerate(tips, start=1):
         measures[f"tip{i}_x"], measures[f"tip{i}_y"] = x, y
     regions = list(state.region_vertices.values())

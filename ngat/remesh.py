@@ -36,7 +36,7 @@ from netgen.geom2d import SplineGeometry
 from scipy.spatial import cKDTree
 
 from ngat.band import DAMAGED, mesh_geometry
-from ngat.crack import GROWN, Slit, crack_tips, grown
+from ngat.crack import GROWN, Slit, grown, tips_of
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
 
@@ -348,7 +348,7 @@ class TipRemesher:
         int
             The number of regions re-meshed.
         """
-        tips = np.asarray(crack_tips(state.arrays, state.v_values, self.slits))
+        tips = np.asarray(tips_of(state, self.slits))
         running = grown(tips, self.slits, GROWN * self.eps)
         return sum(self._remesh_at(state, tip) for tip in tips[running])
 

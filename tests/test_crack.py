@@ -4,10 +4,13 @@ import numpy as np
 import pytest
 from ngsolve import H1, GridFunction
 
-from ngat.crack import components, connects, crack_tips, mesh_edges
+import ngat.crack
+from ngat.crack import components, connects, crack_tips, mesh_edges, tips_of
 from ngat.forms import MeshArrays
 from ngat.geometries.two_slits import SLITS
+from ngat.parameters import Parameters
 from ngat.scene import load_scene
+from ngat.state import ATState
 
 
 @pytest.fixture(scope="module")
@@ -109,3 +112,22 @@ def test_threshold_decides_what_is_cracked(two_slits):
     v = 0.5 * band(arrays.coords, (2, 2), (4, 4), 0.2) + 0.05
     assert not connects(arrays, v, regions["left"], regions["right"], threshold=0.1)
     assert connects(arrays, v, regions["left"], regions["right"], threshold=0.01)
+
+
+def test_tips_of_measures_each_v_once_per_mesh(monkeypatch):
+    scene = load_scene("two-slits")
+    state = ATState(scene.make_mesh(0.5), Parameters().model, scene.loads)
+    measured = []
+    monkeypatch.setattr(
+        ngat.crack, "crack_tips", lambda *args: measured.append(1) or crack_tips(*args)
+    )
+    state.v_values[:] = band(state.arrays.coords, (2, 2), (2.8, 2.8), 0.2)
+    first = tips_of(state, SLITS)
+    assert first == crack_tips(state.arrays, state.v_values, SLITS)
+    assert np.hypot(*np.subtract(first[0], (2.8, 2.8))) < 0.2 + 0.5
+    assert tips_of(state, SLITS) == first and len(measured) == 1
+    state.v_values[:] = 1.0  # another v: measured anew
+    assert tips_of(state, SLITS) == [(2.0, 2.0), (4.0, 4.0)] and len(measured) == 2
+    state.mesh.Refine()  # another mesh with the same (prolongated) v: measured anew
+    state.mesh_changed()
+    assert tips_of(state, SLITS) == [(2.0, 2.0), (4.0, 4.0)] and len(measured) == 3
