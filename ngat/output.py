@@ -265,7 +265,10 @@ def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
     One point per mesh vertex, shared by its triangles, and the nodal values as point data
     (a plane model's u with its two components). NGSolve's ``VTKOutput`` writes ASCII with
     three points per triangle. Uncompressed, so that a step's file has the same size on the
-    same mesh whatever the values (``tests/test_output_growth.py``).
+    same mesh whatever the values (``tests/test_output_growth.py``). The arrays are appended
+    raw after the XML (VTK's appended mode without encoding): pyvista's ``save`` encodes them
+    in base64, which took 0.14 s instead of 0.01 s for a file of 180k elements, a third more
+    bytes.
 
     Parameters
     ----------
@@ -276,7 +279,9 @@ def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
     fields
         Name → P1 GridFunction (H1 or VectorH1 of order 1, whose DOFs are the vertices).
     """
-    import pyvista  # only the VTU writer needs it; keep `import ngat` light
+    # Only the VTU writer needs them; keep `import ngat` light.
+    import pyvista
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
 
     points, triangles = mesh_geometry(mesh)
     cells = np.hstack([np.full((len(triangles), 1), 3, dtype=np.int64), triangles]).ravel()
@@ -286,7 +291,14 @@ def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
         values = field.vec.FV().NumPy()
         dim = len(values) // len(points)
         grid.point_data[name] = values.reshape(dim, -1).T.copy() if dim > 1 else values.copy()
-    grid.save(path, binary=True, compression=None)
+    writer = vtkXMLUnstructuredGridWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(grid)
+    writer.SetDataModeToAppended()
+    writer.EncodeAppendedDataOff()
+    writer.SetCompressorTypeToNone()
+    if not writer.Write():
+        raise OSError(f"VTK could not write {path}")
 
 
 PVD_HEAD = b'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
