@@ -13,8 +13,8 @@ One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's qu
 ``--until T`` stops the load history at t = T (e.g. 1.35: the pre-break steps alone);
 output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time, seconds per
 timed phase, peak memory, AM iterations in total and in the growth window, linear solves,
-fracture time, E(1.0), final elements, element sizes) and ``phases.png``; the run's results
-folder in ``run/``.
+fracture time, E(1.0), final elements, element sizes, the wall of the steps before the
+break step, of it and after it) and ``phases.png``; the run's results folder in ``run/``.
 
 Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
 (removed at the end, also on an error or Ctrl-C) and runs the benchmark ``--repeats`` times
@@ -24,9 +24,10 @@ checkout's root: the two versions never share a process and are measured by the 
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max), the share
-of the wall time per phase ("–" where a checkout does not time a phase), linear solves, final
-elements, fracture time, the error of E(1.0) against ``geometries/reference/two_slits.json``,
-peak memory, and the ratio current/REV of the median wall times.
+of the wall time per phase ("–" where a checkout does not time a phase), the median walls
+before, of and after the break step, linear solves, final elements, fracture time, the error
+of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, and the ratio
+current/REV of the median wall times.
 """
 
 from __future__ import annotations
@@ -76,6 +77,28 @@ def variant(quick: bool, until: float | None) -> list[str]:
     return words if until is None else [*words, "--until", f"{until:g}"]
 
 
+STAGES = ("before the break", "break step", "after the break")
+"""The parts of a load history whose wall times the table shows (:func:`stage_walls`)."""
+
+
+def stage_walls(records: list[dict], fracture: float | None) -> dict[str, float | None]:
+    """Return the wall seconds of the steps before the break step, of it and after it.
+
+    The break step is the load step at the fracture time; without one every step is before
+    it and the other two are ``None``.
+    """
+    walls = dict.fromkeys(STAGES, 0.0)
+    for r in records:
+        if fracture is None or r["t"] < fracture - 1e-9:
+            stage = STAGES[0]
+        else:
+            stage = STAGES[1] if abs(r["t"] - fracture) <= 1e-9 else STAGES[2]
+        walls[stage] += r["wall_s"]
+    if fracture is None:
+        return {STAGES[0]: round(walls[STAGES[0]], 2), STAGES[1]: None, STAGES[2]: None}
+    return {stage: round(wall, 2) for stage, wall in walls.items()}
+
+
 def measure(quick: bool, until: float | None, folder: Path) -> dict:
     """Run two-slits with the ngat on the path and return its figures (``None``: not given)."""
     import ngat
@@ -104,6 +127,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
             lambda: sum(r["am_iterations"] for r in records if onset <= r["t"] <= end)
         ),
         "growth_window": [onset, fracture],
+        "stages_s": optional(lambda: stage_walls(records, fracture)),
         "linear_solves": optional(lambda: sum(r["linear_solves"] for r in records)),
         "fracture_time": fracture,
         "energy_1.0": next((r.get("total") for r in records if abs(r["t"] - 1.0) < 1e-9), None),
@@ -213,6 +237,12 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
             else None
             for p in phases
         },
+        "stage_median_s": {
+            stage: round(statistics.median(b["stages_s"][stage] for b in benches), 2)
+            if all((b.get("stages_s") or {}).get(stage) is not None for b in benches)
+            else None
+            for stage in STAGES
+        },
         "linear_solves": agreed([b.get("linear_solves") for b in benches]),
         "final_elements": agreed([b.get("final_elements") for b in benches]),
         "fracture_time": agreed([b.get("fracture_time") for b in benches]),
@@ -264,6 +294,8 @@ def table(comparison: dict) -> str:
 
     line("wall time median [s]", lambda r: cell(r["wall_median_s"], 1))
     line("wall time min – max [s]", lambda r: f"{r['wall_min_s']:.1f} – {r['wall_max_s']:.1f}")
+    for stage in STAGES:
+        line(f"{stage}, median [s]", lambda r, s=stage: cell(r["stage_median_s"][s], 1))
     for phase in comparison["phases"]:
         line(f"share {phase} [%]", lambda r, p=phase: cell(percent(r["phase_share"][p]), 1))
     line("linear solves", lambda r: cell(r["linear_solves"]))

@@ -75,11 +75,16 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     for key in ("linear_solves", "final_elements", "energy_error_%"):
         assert current[key] is not None and current[key] == against[key]
     assert current["fracture_time"] is None and against["fracture_time"] is None
+    # No break step before t = 1.35: every step's wall is before it.
+    stages = current["stage_median_s"]
+    assert stages["before the break"] > 0
+    assert stages["break step"] is None and stages["after the break"] is None
     assert [r["steps"] for r in comparison["runs"]["current"]] == [28]  # t = 0, 0.05, ..., 1.35
     assert {r["ngat"] for r in comparison["runs"]["current"]} == {str(ROOT / "ngat")}
     markdown = (tmp_path / "compare.md").read_text()
     assert markdown.startswith("two-slits --quick --until 1.35,")
     assert "| fracture time |" in markdown
+    assert "| break step, median [s] | – | – |" in markdown
 
 
 def test_stability_judges_the_broken_body_against_the_reference():
