@@ -314,13 +314,12 @@ class CrackBand:
         (hysteresis, see the module docstring). After a call that did nothing, the next call
         on the same mesh with the same target (each of the search's and the resolved one:
         a load step alternates them) searches about the vertices damaged since and the tips
-        only: the
-        trigger's reach about the union of two vertex sets is the union of their reaches, and
-        the vertices damaged then had no coarse element within it (the search about all damaged
-        vertices after every v-step cost 0.17 s at 200k elements). The centres (damaged
-        vertices, tips) are taken once, on the current mesh: bisection only adds vertices
-        between old ones, so the damaged set of the prolongated v lies within the band around
-        them; the operators are rebuilt once, after the last bisection.
+        only: the trigger's reach about the union of two vertex sets is the union of their
+        reaches, and the vertices damaged then had no coarse element within it (the search
+        about all damaged vertices after every v-step cost 0.17 s at 200k elements). The
+        centres (damaged vertices, tips) are taken once, on the current mesh: bisection only
+        adds vertices between old ones, so the damaged set of the prolongated v lies within
+        the band around them; the operators are rebuilt once, after the last bisection.
 
         Parameters
         ----------

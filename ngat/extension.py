@@ -42,7 +42,7 @@ import numpy as np
 from ngsolve import GridFunction
 
 from ngat.band import DAMAGED, CrackBand
-from ngat.crack import Slit, components, crack_tips
+from ngat.crack import Slit, components, tips_of
 from ngat.halfsteps import HalfStepSolvers
 from ngat.state import ATState
 
@@ -219,7 +219,7 @@ class CrackExtension:
         """
         if not self.slits:
             return False
-        self.tips.append(np.array(crack_tips(state.arrays, state.v_values, self.slits)))
+        self.tips.append(np.array(tips_of(state, self.slits)))
         runs = self.planned(state)
         if not runs:
             return False
@@ -253,7 +253,7 @@ class CrackExtension:
         if accepted:
             self.jumps += 1
             self.jump = min(2 * self.jump, MAX_JUMP * self.eps)
-            self.tips.append(np.array(crack_tips(state.arrays, state.v_values, self.slits)))
+            self.tips.append(np.array(tips_of(state, self.slits)))
             return True
         self.jump /= 2
         if self.jump < FIRST_JUMP * self.eps:

@@ -87,15 +87,12 @@ def stage_walls(records: list[dict], fracture: float | None) -> dict[str, float 
     The break step is the load step at the fracture time; without one every step is before
     it and the other two are ``None``.
     """
+    if fracture is None:
+        return {STAGES[0]: round(sum(r["wall_s"] for r in records), 2), **dict.fromkeys(STAGES[1:])}
     walls = dict.fromkeys(STAGES, 0.0)
     for r in records:
-        if fracture is None or r["t"] < fracture - 1e-9:
-            stage = STAGES[0]
-        else:
-            stage = STAGES[1] if abs(r["t"] - fracture) <= 1e-9 else STAGES[2]
-        walls[stage] += r["wall_s"]
-    if fracture is None:
-        return {STAGES[0]: round(walls[STAGES[0]], 2), STAGES[1]: None, STAGES[2]: None}
+        before, at = r["t"] < fracture - 1e-9, abs(r["t"] - fracture) <= 1e-9
+        walls[STAGES[0] if before else STAGES[1] if at else STAGES[2]] += r["wall_s"]
     return {stage: round(wall, 2) for stage, wall in walls.items()}
 
 
