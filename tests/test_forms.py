@@ -109,6 +109,33 @@ def test_energies_equal_ngsolve_integrals(lumping):
     assert abs(other.energies()["total"] / energies["total"] - 1) > 1e-4
 
 
+def test_energies_computed_once_per_mesh_and_fields(monkeypatch):
+    # The memo of ATState.energies: the same pair is computed once, a change of u, of v or of
+    # the mesh anew, and every answer equals the functional's own.
+    scene = load_scene("two-slits")
+    state = ATState(scene.make_mesh(0.5), ModelParameters(), scene.loads)
+    state.v.Set(0.5 + 0.4 * x * y / 42)
+    state.u.Set(x * x - y)
+    computed = []
+    functional = state.functional
+    original = functional.energies
+    monkeypatch.setattr(functional, "energies", lambda *a: computed.append(1) or original(*a))
+
+    def fresh():
+        return original(state.arrays, state.u_values, state.v_values)
+
+    first = state.energies()
+    first["total"] = -1.0  # a caller's copy: the memo keeps its own
+    assert state.energies() == fresh() and len(computed) == 1
+    state.u_values[3] += 0.1
+    assert state.energies() == fresh() and len(computed) == 2
+    state.v_values[5] -= 0.1
+    assert state.energies() == fresh() and len(computed) == 3
+    state.mesh.Refine()
+    state.mesh_changed()
+    assert state.energies() == fresh() and len(computed) == 4
+
+
 def test_b_matrix_is_an_m_matrix_on_a_nonobtuse_mesh():
     # Hypothesis A: right triangles have non-positive stiffness off-diagonals, and the lumped
     # mass adds to the diagonal only, so b_j has non-positive off-diagonals.
