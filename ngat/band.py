@@ -60,6 +60,7 @@ __all__ = [
     "BUFFER",
     "TIP_RADIUS",
     "band_elements",
+    "nearest_distance",
     "mesh_geometry",
 ]
 
@@ -89,19 +90,59 @@ def mesh_geometry(mesh) -> tuple[np.ndarray, np.ndarray]:
     return ngmesh.Coordinates()[:, :2], elements
 
 
+def nearest_distance(
+    centres: np.ndarray | cKDTree, points: np.ndarray, bounds: np.ndarray
+) -> np.ndarray:
+    """Return the distance from each point to the nearest centre, ∞ where that exceeds its bound.
+
+    A k-d tree query with one bound for all points searches every point as far as the largest
+    bound: on a graded mesh a few wide elements far from the crack set it for all. The points
+    are therefore queried per power-of-two class of their bounds, each class with its own
+    largest bound. A distance within a point's bound is exact; beyond it, it may be exact or ∞.
+
+    Parameters
+    ----------
+    centres
+        (m, 2) points, or a ``cKDTree`` of them (built once where several queries share them).
+    points
+        (n, 2) query points.
+    bounds
+        (n,) distance beyond which a point's distance is not needed.
+    """
+    distance = np.full(len(points), np.inf)
+    if len(points) == 0:
+        return distance
+    tree = centres if isinstance(centres, cKDTree) else cKDTree(centres)
+    classes = np.frexp(bounds)[1]
+    for level in np.unique(classes):
+        among = np.flatnonzero(classes == level)
+        distance[among] = tree.query(points[among], distance_upper_bound=bounds[among].max())[0]
+    return distance
+
+
+def _count(centres: np.ndarray | cKDTree) -> int:
+    """Return the number of centres of an array or a ``cKDTree``."""
+    return centres.n if isinstance(centres, cKDTree) else len(centres)
+
+
+def _tree(centres: np.ndarray) -> np.ndarray | cKDTree:
+    """Return a ``cKDTree`` of the centres, for queries that share them (none if empty)."""
+    return cKDTree(centres) if len(centres) else centres
+
+
 def band_elements(
     coords: np.ndarray,
     elements: np.ndarray,
     diameter: np.ndarray,
-    centres: np.ndarray,
+    centres: np.ndarray | cKDTree,
     radius: float,
 ) -> np.ndarray:
     """Return the elements that come within ``radius`` of any of the ``centres``.
 
     An element is taken when its first vertex lies within ``radius + diameter`` of a centre,
     which holds for every element that meets the disc of that radius (and a few more). The
-    search stops at ``radius`` plus the largest diameter, so elements far from every centre
-    cost next to nothing.
+    search about each element stops at that distance (:func:`nearest_distance`), so elements
+    far from every centre cost next to nothing.
 
     Parameters
     ----------
@@ -112,7 +153,7 @@ def band_elements(
     diameter
         (ne,) their diameters.
     centres
-        (m, 2) points.
+        (m, 2) points, or their ``cKDTree``.
     radius
         Distance from the points.
 
@@ -121,11 +162,10 @@ def band_elements(
     np.ndarray
         (ne,) boolean mask.
     """
-    if len(centres) == 0 or len(elements) == 0:
+    if len(elements) == 0 or _count(centres) == 0:
         return np.zeros(len(elements), dtype=bool)
-    reach = radius + diameter.max()
-    distance, _ = cKDTree(centres).query(coords[elements[:, 0]], distance_upper_bound=reach)
-    return distance <= radius + diameter
+    bounds = radius + diameter
+    return nearest_distance(centres, coords[elements[:, 0]], bounds) <= bounds
 
 
 class CrackBand:
@@ -228,7 +268,8 @@ class CrackBand:
         coords, elements
             Vertex coordinates and element vertex numbers of the current mesh.
         damaged, tips
-            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`).
+            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`), or
+            their ``cKDTree``.
         diameter
             The elements' diameters, if known (else computed).
         """
@@ -262,12 +303,13 @@ class CrackBand:
         coords, elements
             Vertex coordinates and element vertex numbers of the current mesh.
         centres
-            The damaged vertices and the crack tips (:meth:`tips`), stacked.
+            The damaged vertices and the crack tips (:meth:`tips`), stacked, or their
+            ``cKDTree``.
         diameter
             The elements' diameters, if known (else computed).
         """
         marked = np.zeros(len(elements), dtype=bool)
-        if self.grading <= 0 or len(centres) == 0:
+        if self.grading <= 0 or _count(centres) == 0:
             return marked
         if diameter is None:
             diameter = element_diameters(coords, elements)
@@ -276,10 +318,9 @@ class CrackBand:
             return marked
         width = diameter[coarse]
         margin = BUFFER * self.eps
-        reach = margin + (width.max() - self.target) / self.grading + width.max()
-        distance, _ = cKDTree(centres).query(
-            coords[elements[coarse, 0]], distance_upper_bound=reach
-        )
+        # Beyond margin + (w − target)/grading + w an element of width w is never marked.
+        reach = margin + (width - self.target) / self.grading + width
+        distance = nearest_distance(centres, coords[elements[coarse, 0]], reach)
         allowed = self.target + self.grading * np.maximum(0.0, distance - width - margin)
         marked[coarse] = width > allowed
         return marked
@@ -351,6 +392,8 @@ class CrackBand:
                 marked = self.marked(coords, elements, damaged, tips, arrays.diameter)
         graded = self.running(tips)
         everywhere = np.concatenate([damaged, tips]) if graded else np.empty((0, 2))
+        # The centres stay for every round: their trees are built once.
+        damaged, tips, everywhere = _tree(damaged), _tree(tips), _tree(everywhere)
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)

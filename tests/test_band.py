@@ -4,8 +4,9 @@ import copy
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
-from ngat.band import BUFFER, DAMAGED, TIP_RADIUS, CrackBand, band_elements
+from ngat.band import BUFFER, DAMAGED, TIP_RADIUS, CrackBand, band_elements, nearest_distance
 from ngat.driver import run
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError, Parameters
@@ -20,6 +21,22 @@ def test_band_elements_are_those_within_the_radius():
     near = band_elements(coords, elements, diameter, np.array([[0.5, 0.5]]), 0.1)
     assert near.tolist() == [True, False]
     assert not band_elements(coords, elements, diameter, np.empty((0, 2)), 1.0).any()
+
+
+def test_nearest_distance_is_exact_within_each_bound():
+    # Bounds over five orders of magnitude, queried per power-of-two class: within its bound a
+    # point gets its exact distance to the nearest centre, beyond it that distance or ∞.
+    rng = np.random.default_rng(4)
+    centres, points = rng.random((300, 2)), 3 * rng.random((2000, 2)) - 1
+    bounds = 10.0 ** rng.uniform(-4, 1, len(points))
+    exact = np.sqrt(((points[:, None] - centres[None]) ** 2).sum(axis=2)).min(axis=1)
+    for given in (centres, cKDTree(centres)):
+        distance = nearest_distance(given, points, bounds)
+        within = exact <= bounds
+        assert 0.2 < within.mean() < 0.9
+        np.testing.assert_array_equal(distance[within], exact[within])
+        assert np.all((distance[~within] == exact[~within]) | np.isinf(distance[~within]))
+    assert nearest_distance(centres, points[:0], bounds[:0]).shape == (0,)
 
 
 def two_slits_state(eps=0.05):
