@@ -2,11 +2,12 @@
 
 The vertex rule integrates ``P_j(f)`` exactly for P1 data, so one rule, used for every term, gives
 the mass-lumped functional I_j of eq. (7). The forms are written as NGSolve BilinearForms
-(:func:`a_form`, :func:`b_form`): they are the definition, and one assembly of a_j per mesh
-builds the matrix graph. Every solve then gets its values from :class:`LumpedAssembler`, which
-writes them in place from precomputed element stiffness matrices (one vectorised ``bincount``)
-so that the sparse Cholesky factor is refreshed with ``Inverse.Update()``, reusing its symbolic
-part; a test checks that these values equal the assembled forms.
+(:func:`a_form`, :func:`b_form`): they are the definition. An assembly that evaluates nothing
+builds the matrix graph once per mesh (:func:`graph_matrix`), and every solve then gets its
+values from :class:`LumpedAssembler`, which writes them in place from precomputed element
+stiffness matrices (one vectorised ``bincount``) so that the sparse Cholesky factor is
+refreshed with ``Inverse.Update()``, reusing its symbolic part; a test checks that these
+values equal the assembled forms.
 
 With ``lumped=False`` every lumped term is integrated exactly instead (:func:`exact_dx`): P_j(v²)
 becomes v² in a_j and the mass of b_j becomes the consistent P1 mass |T|/12 (1 + δ_ab). That
@@ -34,6 +35,7 @@ __all__ = [
     "exact_dx",
     "a_form",
     "b_form",
+    "graph_matrix",
     "mesh_edges",
     "unique_keys",
     "MeshArrays",
@@ -118,6 +120,20 @@ def b_form(
         (density / gc + surface.reaction) * v * psi + surface.diffusion * grad(v) * grad(psi)
     ) * (lumped_dx() if lumped else exact_dx())
     return form
+
+
+def graph_matrix(fes: ngsolve.FESpace) -> ngsolve.la.SparseMatrixd:
+    """Return a zero matrix on ``fes`` whose graph couples every two DOFs of an element.
+
+    The graph of a_j and b_j (NGSolve's assembly allocates the element graph whatever the
+    integrand): assembled with an empty integration rule, nothing is evaluated, 0.27 s at 180k
+    elements where an assembly of a_j took 0.47 s. Its values come from
+    :class:`LumpedAssembler`.
+    """
+    u, phi = fes.TnT()
+    form = BilinearForm(fes, symmetric=True)
+    form += ngsolve.InnerProduct(u, phi) * dx(intrules={TRIG: IntegrationRule([], [])})
+    return form.Assemble().mat
 
 
 def unique_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,10 +1,11 @@
 """The matrices of the two half-steps on one mesh, written in place at the current fields.
 
 a_j(v; u, φ) of the u-step and b_j(u; v, ψ) of the v-step (paper, Algorithm 1, steps 2.1 and
-2.2; Definition 2) as NGSolve sparse matrices. Per mesh each graph is built once by one NGSolve
-assembly of its form (:func:`ngat.forms.a_form`, :func:`~ngat.forms.b_form`); every later
-assembly only rewrites the values in place from the element coefficients of the functional
-(:class:`ngat.functional.LumpedFunctional`) by the vectorised :class:`ngat.forms.LumpedAssembler`,
+2.2; Definition 2) as NGSolve sparse matrices. Per mesh each graph is built once, by an
+NGSolve assembly that evaluates nothing (:func:`ngat.forms.graph_matrix`); every assembly of
+a_j (:func:`ngat.forms.a_form`) or b_j (:func:`~ngat.forms.b_form`) then writes the values in
+place from the element coefficients of the functional (:class:`ngat.functional.LumpedFunctional`)
+by the vectorised :class:`ngat.forms.LumpedAssembler`,
 so that a factorisation can be refreshed with its symbolic part kept. The reaction forces are
 the residual of the u-equation at the Dirichlet DOFs, so they live here too.
 
@@ -19,7 +20,7 @@ import functools
 
 import numpy as np
 
-from ngat.forms import LumpedAssembler, a_form, b_form
+from ngat.forms import LumpedAssembler, graph_matrix
 from ngat.state import ATState
 
 __all__ = ["LumpedOperators"]
@@ -52,12 +53,9 @@ class LumpedOperators:
         self.arrays = arrays = state.arrays
         model, density = state.model, state.elasticity
         with state.timer("assembly"):
-            # One NGSolve assembly of a_j builds the graph; b_j has the same graph when u is
-            # scalar, and both get their values from the vectorised assemblers (equal to
-            # a_form and b_form, checked in tests/test_forms.py).
-            self.a_matrix = (
-                a_form(state.fes_u, state.v, model.eta, bilinear=density.bilinear).Assemble().mat
-            )
+            # The graphs come from NGSolve (b_j's is a_j's when u is scalar), the values from
+            # the vectorised assemblers (equal to a_form and b_form, tests/test_forms.py).
+            self.a_matrix = graph_matrix(state.fes_u)
             self.assembler = LumpedAssembler(
                 arrays, self.a_matrix, model.lumping,
                 density.element_dofs(arrays), density.element_stiffness(arrays),
@@ -67,11 +65,7 @@ class LumpedOperators:
                 self.b_matrix = self.a_matrix.CreateMatrix()
                 self.b_assembler = self.assembler
             else:
-                self.b_matrix = (
-                    b_form(state.fes, state.u, model.surface, bilinear=density.bilinear)
-                    .Assemble()
-                    .mat
-                )
+                self.b_matrix = graph_matrix(state.fes)
                 self.b_assembler = LumpedAssembler(arrays, self.b_matrix, model.lumping)
 
     def u_matrix_values(self) -> np.ndarray:

@@ -80,6 +80,31 @@ def test_vector_assembly_equals_ngsolve_forms(lumped):
     np.testing.assert_allclose(ours, reference, atol=1e-12 * abs(reference).max())
 
 
+@pytest.mark.parametrize("model", ["antiplane", "plane_strain"])
+def test_operators_write_the_forms_into_their_own_graph(model):
+    # LumpedOperators take their graphs from an assembly that evaluates nothing
+    # (ngat.forms.graph_matrix): the same graphs as a_form's and b_form's, and the same values.
+    if model == "antiplane":
+        state = ATState(framed_square(0.25), ModelParameters(), {"frame": lambda t: 0 * t})
+        state.u.Set(x * x - y)
+    else:
+        state = plane_state(model)
+        state.u.Set(CF((x * x - y, 0.3 * x * y + y)))
+    state.v.Set(0.5 + 0.3 * x * y)
+    density = state.elasticity
+    operators = LumpedOperators(state)
+    operators.assemble_a()
+    operators.assemble_b()
+    a = a_form(state.fes_u, state.v, state.model.eta, bilinear=density.bilinear).Assemble()
+    b = b_form(state.fes, state.u, state.model.surface, bilinear=density.bilinear).Assemble()
+    for ours, form in ((operators.a_matrix, a.mat), (operators.b_matrix, b.mat)):
+        for mine, theirs in zip(ours.CSR()[1:], form.CSR()[1:], strict=True):
+            np.testing.assert_array_equal(np.asarray(mine), np.asarray(theirs))
+        reference = form.AsVector().FV().NumPy()
+        values = ours.AsVector().FV().NumPy()
+        np.testing.assert_allclose(values, reference, atol=1e-12 * abs(reference).max())
+
+
 @pytest.mark.parametrize("model", ["plane_strain", "plane_stress"])
 def test_bulk_energy_equals_integrated_density(model):
     # bulk = ∫ (P_j(v²) + η) W(u): W is constant per element, so the vertex rule is exact.
