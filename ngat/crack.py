@@ -147,13 +147,11 @@ def crack_tips(
     # The edges with a cracked end: those within the crack and those leaving it.
     edges = arrays.edges[cracked[arrays.edges[:, 0]] | cracked[arrays.edges[:, 1]]]
     labels = _components(edges, cracked)
+    inside = np.flatnonzero(cracked)
     tips = []
     for mouth, tip in slits:
         mouth, tip = np.asarray(mouth, dtype=float), np.asarray(tip, dtype=float)
-        nearest = np.argmin(np.linalg.norm(coords - tip, axis=1))
-        at = arrays.elements == nearest
-        h = arrays.diameter[at[:, 0] | at[:, 1] | at[:, 2]].max()
-        inside = np.flatnonzero(cracked)
+        h = arrays.size_at(tip)
         touching = inside[_distance_to_segment(coords[inside], mouth, tip) <= h]
         crack = np.isin(labels, np.unique(labels[touching])) & cracked
         if not crack.any():

@@ -61,22 +61,16 @@ class EdgeTopology:
     """
 
     def __init__(self, arrays: MeshArrays):
-        elements = arrays.elements
         nv = arrays.nv
-        start, end = elements, elements[:, [1, 2, 0]]
-        lo, hi = np.minimum(start, end), np.maximum(start, end)
-        keys, inverse, counts = np.unique(
-            (lo * nv + hi).ravel(), return_inverse=True, return_counts=True
-        )
+        keys, self.element_edges, order = arrays.edge_numbering
+        counts = np.bincount(self.element_edges.ravel(), minlength=len(keys))
         if counts.max(initial=0) > 2:
             raise ValueError("an edge belongs to more than two elements: not a planar mesh")
-        inverse = inverse.ravel()
         self.first, self.second = keys // nv, keys % nv
-        self.vertices = np.stack([self.first, self.second], axis=1)
-        self.element_edges = inverse.reshape(-1, 3)
+        self.vertices = arrays.edges
         self.boundary = counts == 1
         # Element-edges sorted by edge number: the first (and second) of each group.
-        owner = np.argsort(inverse, kind="stable") // 3
+        owner = order // 3
         first = np.concatenate([[0], np.cumsum(counts)[:-1]])
         self.elements = np.full((len(keys), 2), -1, dtype=np.int64)
         self.elements[:, 0] = owner[first]

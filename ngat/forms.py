@@ -30,6 +30,7 @@ from ngat.crack_density import CrackDensity
 __all__ = [
     "vertex_rule",
     "element_diameters",
+    "vertex_size",
     "row_sum",
     "lumped_dx",
     "exact_dx",
@@ -37,6 +38,7 @@ __all__ = [
     "b_form",
     "graph_matrix",
     "mesh_edges",
+    "edge_numbering",
     "unique_keys",
     "MeshArrays",
     "LumpedAssembler",
@@ -136,26 +138,54 @@ def graph_matrix(fes: ngsolve.FESpace) -> ngsolve.la.SparseMatrixd:
     return form.Assemble().mat
 
 
-def unique_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return the sorted distinct keys and the position of every key among them.
+def unique_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the sorted distinct keys, the position of every key among them, and the sort.
 
-    The same as ``np.unique(keys, return_inverse=True)`` for integer keys, by one sort: on the
-    millions of keys of a sparsity graph several times faster than ``np.unique`` without
-    ``return_inverse`` (a hash table, then a sort) followed by ``np.searchsorted``.
+    The same as ``np.unique(keys, return_inverse=True)`` for integer keys, by one stable sort:
+    on the millions of keys of a sparsity graph several times faster than ``np.unique``
+    without ``return_inverse`` (a hash table, then a sort) followed by ``np.searchsorted``.
+    The sort lists the keys by position, equal keys in their order in ``keys``.
 
     Parameters
     ----------
     keys
         (n,) integer keys.
     """
-    order = np.argsort(keys)
+    order = np.argsort(keys, kind="stable")
     ordered = keys[order]
     first = np.empty(len(keys), dtype=bool)
     first[:1] = True
     np.not_equal(ordered[1:], ordered[:-1], out=first[1:])
     position = np.empty(len(keys), dtype=np.int64)
     position[order] = np.cumsum(first) - 1
-    return ordered[first], position
+    return ordered[first], position, order
+
+
+def edge_numbering(elements: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the edges of a triangle mesh numbered by their keys lo · size + hi (lo < hi).
+
+    Local edge k of an element joins its local vertices k and (k + 1) mod 3.
+
+    Parameters
+    ----------
+    elements
+        (ne, 3) vertex numbers of the triangles.
+    size
+        More than the largest vertex number.
+
+    Returns
+    -------
+    keys : (n_edges,) int array
+        The sorted distinct keys.
+    element_edges : (ne, 3) int array
+        The edge number of every local edge of every element.
+    order : (3 ne,) int array
+        The local edges (element · 3 + k) by edge number, an edge's elements in element order.
+    """
+    start, end = elements, elements[:, [1, 2, 0]]
+    keys = np.minimum(start, end).astype(np.int64) * size + np.maximum(start, end)
+    distinct, position, order = unique_keys(keys.ravel())
+    return distinct, position.reshape(-1, 3), order
 
 
 def mesh_edges(elements: np.ndarray) -> np.ndarray:
@@ -166,9 +196,8 @@ def mesh_edges(elements: np.ndarray) -> np.ndarray:
     elements
         (ne, 3) vertex numbers of the triangles.
     """
-    edges = np.sort(elements[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     size = int(elements.max(initial=-1)) + 1
-    keys = unique_keys(edges[:, 0].astype(np.int64) * size + edges[:, 1])[0]
+    keys = edge_numbering(elements, size)[0]
     return np.stack([keys // size, keys % size], axis=1)
 
 
@@ -190,6 +219,15 @@ def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
     edges = xy[:, [1, 2, 0]] - xy
     lengths = np.sqrt(edges[..., 0] * edges[..., 0] + edges[..., 1] * edges[..., 1])
     return np.maximum(np.maximum(lengths[:, 0], lengths[:, 1]), lengths[:, 2])
+
+
+def vertex_size(
+    coords: np.ndarray, elements: np.ndarray, diameter: np.ndarray, point: tuple[float, float]
+) -> float:
+    """Return the largest diameter of the elements at the vertex nearest to ``point``."""
+    nearest = np.argmin(np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1))
+    at = elements == nearest
+    return float(diameter[at[:, 0] | at[:, 1] | at[:, 2]].max())
 
 
 class MeshArrays:
@@ -234,11 +272,29 @@ class MeshArrays:
             self.elements.ravel(), weights=np.repeat(self.area / 3, 3), minlength=self.nv
         )
         self.diameter = element_diameters(self.coords, self.elements)
+        self._sizes_at: dict[tuple[float, float], float] = {}
+
+    def size_at(self, point: tuple[float, float]) -> float:
+        """Return the largest diameter of the elements at the vertex nearest to ``point``.
+
+        Computed once per mesh and point (the crack measures ask it at the slit tips after
+        every v-step, :func:`ngat.crack.crack_tips`).
+        """
+        key = (float(point[0]), float(point[1]))
+        if key not in self._sizes_at:
+            self._sizes_at[key] = vertex_size(self.coords, self.elements, self.diameter, key)
+        return self._sizes_at[key]
+
+    @cached_property
+    def edge_numbering(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`edge_numbering` of the mesh with keys lo · nv + hi; computed once per mesh."""
+        return edge_numbering(self.elements, self.nv)
 
     @cached_property
     def edges(self) -> np.ndarray:
         """Unique edges (n_edges, 2), smaller vertex first; computed once per mesh."""
-        return mesh_edges(self.elements)
+        keys = self.edge_numbering[0]
+        return np.stack([keys // self.nv, keys % self.nv], axis=1)
 
     @cached_property
     def _gradient_matrix(self) -> csr_matrix:

@@ -40,6 +40,7 @@ from matplotlib.tri import Triangulation
 
 from ngat.crack import crack_tips, mesh_edges
 from ngat.deformation import has_plane_displacement, plot_displacement
+from ngat.forms import vertex_size
 from ngat.rendering import DPI, draw_field_matplotlib, draw_field_pyvista, grid_triangles
 from ngat.results import Frame, field_series, read_fields, read_records
 
@@ -342,6 +343,7 @@ def default_zoom(
             ne=len(elements),
             diameter=diameter,
             edges=mesh_edges(elements),
+            size_at=lambda point: vertex_size(coords, elements, diameter, point),
         )
         vertex_v = np.zeros(len(coords))
         vertex_v[inverse.reshape(-1)] = v

@@ -167,10 +167,11 @@ def test_unique_keys_is_numpys_unique_with_inverse():
     from ngat.forms import unique_keys
 
     keys = np.random.default_rng(1).integers(0, 1000, size=10_000)
-    distinct, position = unique_keys(keys)
+    distinct, position, order = unique_keys(keys)
     expected, inverse = np.unique(keys, return_inverse=True)
     np.testing.assert_array_equal(distinct, expected)
     np.testing.assert_array_equal(position, inverse)
+    np.testing.assert_array_equal(order, np.argsort(inverse, kind="stable"))
 
 
 def test_row_sums_and_vertex_means_are_numpys_to_the_last_bit():
