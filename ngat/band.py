@@ -257,8 +257,8 @@ class CrackBand:
         self,
         coords: np.ndarray,
         elements: np.ndarray,
-        damaged: np.ndarray,
-        tips: np.ndarray,
+        damaged: np.ndarray | cKDTree,
+        tips: np.ndarray | cKDTree,
         diameter: np.ndarray | None = None,
     ) -> np.ndarray:
         """Return the elements wider than the target within the band around the centres.
@@ -289,7 +289,7 @@ class CrackBand:
         self,
         coords: np.ndarray,
         elements: np.ndarray,
-        centres: np.ndarray,
+        centres: np.ndarray | cKDTree,
         diameter: np.ndarray | None = None,
     ) -> np.ndarray:
         """Return the elements wider than ``target + grading · (d − BUFFER · ε)``.
@@ -326,7 +326,11 @@ class CrackBand:
         return marked
 
     def triggered(
-        self, coords: np.ndarray, elements: np.ndarray, damaged: np.ndarray, tips: np.ndarray
+        self,
+        coords: np.ndarray,
+        elements: np.ndarray,
+        damaged: np.ndarray | cKDTree,
+        tips: np.ndarray | cKDTree,
     ) -> bool:
         """Return whether any of the (marked) elements lies within ``trigger`` times the radii.
 
@@ -338,7 +342,8 @@ class CrackBand:
             Vertex numbers of the elements :meth:`marked` returned (the trigger's reach lies
             inside the band's, so no other element can trigger).
         damaged, tips
-            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`).
+            The damaged vertices (v < ``DAMAGED``) and the crack tips (:meth:`tips`), or
+            their ``cKDTree``.
         """
         diameter = element_diameters(coords, elements)
         reach = self.trigger * self.eps
@@ -377,23 +382,26 @@ class CrackBand:
             coords, elements = arrays.coords, arrays.elements
             is_damaged = state.v_values < DAMAGED
             damaged, tips = coords[is_damaged], self.tips(state)
-            searched = damaged
+            # k-d trees of the centres, built once for the trigger and every bisection round
+            # (of all damaged vertices only when they are searched, or the band is refined).
+            tips_tree, damaged_tree = _tree(tips), None
             clear = self._clear.get(self.target)
             if clear is not None and clear[0] is arrays:
-                searched = coords[is_damaged & ~clear[1]]
-            marked = self.marked(coords, elements, searched, tips, arrays.diameter)
-            triggered = self.triggered(coords, elements[marked], searched, tips)
+                searched = _tree(coords[is_damaged & ~clear[1]])
+            else:
+                searched = damaged_tree = _tree(damaged)
+            marked = self.marked(coords, elements, searched, tips_tree, arrays.diameter)
+            triggered = self.triggered(coords, elements[marked], searched, tips_tree)
         if not triggered:
             self._clear[self.target] = (arrays, is_damaged)
             return 0
         self._clear = {}
-        if searched is not damaged:
+        if damaged_tree is None:
             with state.timer("band"):
-                marked = self.marked(coords, elements, damaged, tips, arrays.diameter)
+                damaged_tree = _tree(damaged)
+                marked = self.marked(coords, elements, damaged_tree, tips_tree, arrays.diameter)
         graded = self.running(tips)
-        everywhere = np.concatenate([damaged, tips]) if graded else np.empty((0, 2))
-        # The centres stay for every round: their trees are built once.
-        damaged, tips, everywhere = _tree(damaged), _tree(tips), _tree(everywhere)
+        everywhere = _tree(np.concatenate([damaged, tips]) if graded else np.empty((0, 2)))
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)
@@ -402,7 +410,7 @@ class CrackBand:
             with state.timer("band"):
                 coords, elements = mesh_geometry(state.mesh)
                 diameter = element_diameters(coords, elements)
-                marked = self.marked(coords, elements, damaged, tips, diameter)
+                marked = self.marked(coords, elements, damaged_tree, tips_tree, diameter)
                 marked |= self.graded(coords, elements, everywhere, diameter)
         if rounds:
             rebuild(state)
