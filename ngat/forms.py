@@ -329,6 +329,11 @@ class MeshArrays:
         return (values[first] + values[second] + values[third]) / 3
 
     @cached_property
+    def centroid(self) -> np.ndarray:
+        """Element centroids (ne, 2): :meth:`vertex_mean` of the coordinates, once per mesh."""
+        return self.vertex_mean(self.coords)
+
+    @cached_property
     def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The first, second and third vertex of every element, each contiguous."""
         return tuple(np.ascontiguousarray(self.elements[:, i]) for i in range(3))

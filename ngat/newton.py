@@ -117,8 +117,10 @@ class NewtonSolver:
         c = state.elasticity.components
         operators = self.half_steps.operators
         n = operators.b_matrix.height
+        # Python lists: NGSolve's CreateFromCOO takes them 2.5 times faster than numpy arrays
+        # (0.058 s against 0.146 s for S at 180k elements, conversion included).
         stack = SparseMatrixd.CreateFromCOO(
-            np.arange((c + 1) * n), np.tile(np.arange(n), c + 1), np.ones((c + 1) * n),
+            list(range((c + 1) * n)), list(range(n)) * (c + 1), [1.0] * ((c + 1) * n),
             (c + 1) * n, n,
         )  # fmt: skip
         self.matrix = stack @ operators.b_matrix @ stack.CreateTranspose()

@@ -331,7 +331,7 @@ class TipRemesher:
         fixed = state.dirichlet_vertices | state.boundary_vertices | damaged | state.initial_crack
         allowed = np.zeros(arrays.ne, dtype=bool)
         kept = ~fixed[elements].any(axis=1)
-        kept[kept] = ~self._native(state, arrays.coords[elements[kept]].mean(axis=1))
+        kept[kept] = ~self._native(state, arrays.centroid[candidates[kept]])
         allowed[candidates] = kept
         return allowed
 
@@ -356,15 +356,14 @@ class TipRemesher:
         """Re-mesh the disc about one tip if it needs it; return whether the mesh changed."""
         with state.timer("remesh"):
             arrays = state.arrays
-            centroid = arrays.coords[arrays.elements].mean(axis=1)
-            distance = np.linalg.norm(centroid - tip, axis=1) - arrays.diameter
+            distance = np.linalg.norm(arrays.centroid - tip, axis=1) - arrays.diameter
             close = distance < TRIGGER * self.radius
             if not self._allowed(state, close).any():
                 return False
             h = self.eps
             for _ in range(MAX_ROUNDS):
                 arrays = state.arrays
-                centroid = arrays.coords[arrays.elements].mean(axis=1)
+                centroid = arrays.centroid
                 disc = np.linalg.norm(centroid - tip, axis=1) < self.radius
                 disc &= ~state.dirichlet_vertices[arrays.elements].any(axis=1)
                 disc &= ~self._native(state, centroid)

@@ -174,7 +174,7 @@ def test_unique_keys_is_numpys_unique_with_inverse():
     np.testing.assert_array_equal(order, np.argsort(inverse, kind="stable"))
 
 
-def test_row_sums_and_vertex_means_are_numpys_to_the_last_bit():
+def test_row_sums_vertex_means_and_centroids_are_numpys_to_the_last_bit():
     # The fast paths promise the same numbers as numpy's reductions, which the runs' bit-for-bit
     # repeatability (checkpoints, the stored regression values) relies on.
     rng = np.random.default_rng(4)
@@ -184,3 +184,5 @@ def test_row_sums_and_vertex_means_are_numpys_to_the_last_bit():
     arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
     v = rng.random(arrays.nv)
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
+    centroid = arrays.coords[arrays.elements].mean(axis=1)
+    np.testing.assert_array_equal(arrays.centroid, centroid)
