@@ -1,8 +1,8 @@
 """The matrices of the two half-steps on one mesh, written in place at the current fields.
 
 a_j(v; u, φ) of the u-step and b_j(u; v, ψ) of the v-step (paper, Algorithm 1, steps 2.1 and
-2.2; Definition 2) as NGSolve sparse matrices. Per mesh each graph is built once, by an
-NGSolve assembly that evaluates nothing (:func:`ngat.forms.graph_matrix`); every assembly of
+2.2; Definition 2) as NGSolve sparse matrices. Per mesh each graph is built once, from the
+mesh's edges (:func:`ngat.forms.graph_matrix`); every assembly of
 a_j (:func:`ngat.forms.a_form`) or b_j (:func:`~ngat.forms.b_form`) then writes the values in
 place from the element coefficients of the functional (:class:`ngat.functional.LumpedFunctional`)
 by the vectorised :class:`ngat.forms.LumpedAssembler`,
@@ -53,9 +53,9 @@ class LumpedOperators:
         self.arrays = arrays = state.arrays
         model, density = state.model, state.elasticity
         with state.timer("assembly"):
-            # The graphs come from NGSolve (b_j's is a_j's when u is scalar), the values from
+            # The graphs come from the edges (b_j's is a_j's when u is scalar), the values from
             # the vectorised assemblers (equal to a_form and b_form, tests/test_forms.py).
-            self.a_matrix = graph_matrix(state.fes_u)
+            self.a_matrix = graph_matrix(arrays, density.components)
             self.assembler = LumpedAssembler(
                 arrays, self.a_matrix, model.lumping,
                 density.element_dofs(arrays), density.element_stiffness(arrays),
@@ -65,7 +65,7 @@ class LumpedOperators:
                 self.b_matrix = self.a_matrix.CreateMatrix()
                 self.b_assembler = self.assembler
             else:
-                self.b_matrix = graph_matrix(state.fes)
+                self.b_matrix = graph_matrix(arrays)
                 self.b_assembler = LumpedAssembler(arrays, self.b_matrix, model.lumping)
 
     def u_matrix_values(self) -> np.ndarray:

@@ -82,8 +82,8 @@ def test_vector_assembly_equals_ngsolve_forms(lumped):
 
 @pytest.mark.parametrize("model", ["antiplane", "plane_strain"])
 def test_operators_write_the_forms_into_their_own_graph(model):
-    # LumpedOperators take their graphs from an assembly that evaluates nothing
-    # (ngat.forms.graph_matrix): the same graphs as a_form's and b_form's, and the same values.
+    # LumpedOperators build their graphs from the mesh's edges (ngat.forms.graph_matrix): the
+    # same graphs as NGSolve's assembly of a_form and b_form, and the same values.
     if model == "antiplane":
         state = ATState(framed_square(0.25), ModelParameters(), {"frame": lambda t: 0 * t})
         state.u.Set(x * x - y)

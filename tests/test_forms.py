@@ -186,3 +186,27 @@ def test_row_sums_vertex_means_and_centroids_are_numpys_to_the_last_bit():
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
     centroid = arrays.coords[arrays.elements].mean(axis=1)
     np.testing.assert_array_equal(arrays.centroid, centroid)
+
+
+def test_recalled_element_quantities_are_those_of_the_current_values():
+    # MeshArrays keeps |∇w|², ∇w and P_j(w²) of recent nodal values: asked again with equal
+    # values it returns the same numbers (read-only), with changed values new ones.
+    arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
+    rng = np.random.default_rng(7)
+    v = rng.random(arrays.nv)
+    gradient = arrays.gradient(v)
+    first = arrays.squared_gradient(v)
+    mean = arrays.square_mean(v)
+    assert arrays.squared_gradient(v.copy()) is first
+    assert arrays.square_mean(v.copy()) is mean
+    assert not first.flags.writeable and not gradient.flags.writeable
+    np.testing.assert_array_equal(first, (gradient**2).sum(axis=1))
+    np.testing.assert_array_equal(mean, (v * v)[arrays.elements].mean(axis=1))
+    v[0] += 0.5  # in place, as the half-steps change the fields
+    changed = arrays.squared_gradient(v)
+    element = np.flatnonzero((arrays.elements == 0).any(axis=1))[0]
+    assert changed[element] != first[element]
+    fresh = MeshArrays(load_scene("two-slits").make_mesh(0.5))
+    np.testing.assert_array_equal(changed, fresh.squared_gradient(v))
+    np.testing.assert_array_equal(arrays.square_mean(v), fresh.square_mean(v))
+    np.testing.assert_array_equal(arrays.square_mean(v, lumped=False), fresh.square_mean(v, False))
