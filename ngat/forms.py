@@ -2,9 +2,9 @@
 
 The vertex rule integrates ``P_j(f)`` exactly for P1 data, so one rule, used for every term, gives
 the mass-lumped functional I_j of eq. (7). The forms are written as NGSolve BilinearForms
-(:func:`a_form`, :func:`b_form`): they are the definition. An assembly that evaluates nothing
-builds the matrix graph once per mesh (:func:`graph_matrix`), and every solve then gets its
-values from :class:`LumpedAssembler`, which writes them in place from precomputed element
+(:func:`a_form`, :func:`b_form`): they are the definition. The matrix graph is built once per
+mesh from its edges (:func:`graph_matrix`, NGSolve's graph of those forms), and every solve then
+gets its values from :class:`LumpedAssembler`, which writes them in place from precomputed element
 stiffness matrices (one vectorised ``bincount``) so that the sparse Cholesky factor is
 refreshed with ``Inverse.Update()``, reusing its symbolic part; a test checks that these
 values equal the assembled forms.
