@@ -222,7 +222,7 @@ def mu_estimator(
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
     grad_v = arrays.gradient(v)
     flux, intact = elasticity.fluxes(elasticity.gradient(arrays, u))
-    grad_v_sq = np.einsum("ek,ek->e", grad_v, grad_v)
+    grad_v_sq = arrays.squared_gradient(v)
     coupling = np.sqrt((np.einsum("eik,ek->ei", flux, grad_v) ** 2).sum(axis=1))  # |s∇v|
     indicators = h2 * h2 * grad_v_sq * grad_v_sq * (flux**2).sum(axis=(1, 2)) * area
     indicators += 4 * h2 * coupling * coupling * _linear_square_integral(arrays, v[arrays.elements])
@@ -311,9 +311,8 @@ def nu_estimator(
         ν_j(u, v; T)², shape (ne,); ν_j(u, v) is the square root of the sum.
     """
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
-    grad_v = arrays.gradient(v)
     reaction = surface.reaction + (elasticity or AntiPlane()).degraded_density(arrays, u) / gc
-    indicators = h2 * h2 * np.einsum("ek,ek->e", grad_v, grad_v) * reaction * reaction * area
+    indicators = h2 * h2 * arrays.squared_gradient(v) * reaction * reaction * area
     local = v[arrays.elements]
     residual = reaction[:, None] * local - surface.source
     residual = np.where(local >= 1, np.maximum(residual, 0.0), residual)
