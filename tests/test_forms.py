@@ -14,6 +14,7 @@ from ngat.forms import (
     exact_dx,
     lumped_dx,
     row_sum,
+    sparse_from_coo,
     vertex_rule,
 )
 from ngat.parameters import ModelParameters
@@ -210,3 +211,19 @@ def test_recalled_element_quantities_are_those_of_the_current_values():
     np.testing.assert_array_equal(changed, fresh.squared_gradient(v))
     np.testing.assert_array_equal(arrays.square_mean(v), fresh.square_mean(v))
     np.testing.assert_array_equal(arrays.square_mean(v, lumped=False), fresh.square_mean(v, False))
+
+
+def test_sparse_from_coo_is_scipys_csr_with_duplicates_summed():
+    from scipy.sparse import coo_matrix
+
+    rng = np.random.default_rng(3)
+    rows, cols = rng.integers(0, 40, 300), rng.integers(0, 30, 300)
+    values = rng.standard_normal(300)
+    ours = sparse_from_coo(rows, cols, values, 40, 30)
+    theirs = coo_matrix((values, (rows, cols)), shape=(40, 30)).tocsr()
+    theirs.sum_duplicates()
+    theirs.sort_indices()
+    data, indices, indptr = ours.CSR()
+    np.testing.assert_array_equal(np.asarray(indptr), theirs.indptr)
+    np.testing.assert_array_equal(np.asarray(indices), theirs.indices)
+    np.testing.assert_allclose(np.asarray(data), theirs.data, rtol=1e-14)
