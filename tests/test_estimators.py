@@ -31,7 +31,7 @@ from ngsolve import (
 
 from ngat.crack_density import crack_density
 from ngat.estimators import EdgeTopology, meets, mu_estimator, nu_estimator
-from ngat.forms import MeshArrays
+from ngat.forms import MeshArrays, row_sum
 from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ModelParameters
@@ -361,3 +361,15 @@ def test_estimator_cost_against_one_alternating_minimisation_iteration():
     assert mu.shape == nu.shape == (mesh.ne,)
     assert np.isfinite(mu).all() and np.isfinite(nu).all()
     assert not meets(state.arrays, crack).all()
+
+
+def test_element_sums_are_row_sums_of_the_gathered_edges_to_the_last_bit():
+    # EdgeTopology.element_sum by the incidence product promises row_sum's numbers: the
+    # estimators, and so the refinements, must not move with it.
+    arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
+    edges = EdgeTopology(arrays)
+    rng = np.random.default_rng(5)
+    per_edge = rng.random(edges.nedges) * 10.0 ** rng.integers(-8, 8, edges.nedges)
+    np.testing.assert_array_equal(
+        edges.element_sum(per_edge), row_sum(per_edge[edges.element_edges])
+    )
