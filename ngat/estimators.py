@@ -158,9 +158,21 @@ def meets(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     return mask[first] | mask[second] | mask[third]
 
 
-def _linear_square_integral(arrays: MeshArrays, values: np.ndarray) -> np.ndarray:
-    """Return ∫_T w² for w linear on T with vertex values ``values`` (ne, 3): the P1 mass matrix."""
-    return arrays.area / 12 * (row_sum(values * values) + row_sum(values) ** 2)
+def _linear_square_integral(arrays: MeshArrays, corners: list[np.ndarray]) -> np.ndarray:
+    """Return ∫_T w² for w linear on T with vertex values ``corners`` (three (ne,) arrays).
+
+    The P1 mass matrix: |T|/12 (Σ w_a² + (Σ w_a)²), summed in the order of the corners (the
+    numbers of :func:`row_sum` over the (ne, 3) values, without their strided columns).
+    """
+    first, second, third = corners
+    squares = first * first + second * second + third * third
+    total = first + second + third
+    return arrays.area / 12 * (squares + total**2)
+
+
+def _corner_values(arrays: MeshArrays, values: np.ndarray) -> list[np.ndarray]:
+    """Return a P1 function's values at the first, second and third vertex of every element."""
+    return [values[corner] for corner in arrays.corners]
 
 
 def flux_jumps(
@@ -242,7 +254,8 @@ def mu_estimator(
     coupling = np.sqrt((np.einsum("eik,ek->ei", flux, grad_v) ** 2).sum(axis=1))  # |s∇v|
     flux_sq = row_sum((flux * flux).reshape(arrays.ne, -1))  # |s|², numpy's sum to the last bit
     indicators = h2 * h2 * grad_v_sq * grad_v_sq * flux_sq * area
-    indicators += 4 * h2 * coupling * coupling * _linear_square_integral(arrays, v[arrays.elements])
+    v_squared = _linear_square_integral(arrays, _corner_values(arrays, v))  # ∫_T v²
+    indicators += 4 * h2 * coupling * coupling * v_squared
     # ∫_e (v² + η)² ds for v linear from a to b along e: with a², ab, b² (products, not
     # powers, which numpy evaluates ten times slower) the quartic is a⁴ + a³b + a²b² + ab³ + b⁴.
     a, b = v[edges.first], v[edges.second]
@@ -330,9 +343,10 @@ def nu_estimator(
     h, h2, area = arrays.diameter, arrays.h2, arrays.area
     reaction = surface.reaction + (elasticity or AntiPlane()).degraded_density(arrays, u) / gc
     indicators = h2 * h2 * arrays.squared_gradient(v) * reaction * reaction * area
-    local = v[arrays.elements]
-    residual = reaction[:, None] * local - surface.source
-    residual = np.where(local >= 1, np.maximum(residual, 0.0), residual)
+    residual = []
+    for local in _corner_values(arrays, v):
+        value = reaction * local - surface.source
+        residual.append(np.where(local >= 1, np.maximum(value, 0.0), value))
     indicators += h2 * _linear_square_integral(arrays, residual)
     per_edge = surface.diffusion**2 * edges.length * edges.normal_flux_jump(v) ** 2
     per_edge[edges.within(crack)] = 0.0
