@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from ngat.band import BUFFER, DAMAGED, TIP_RADIUS, CrackBand, band_elements, nearest_distance
+from ngat.band import (
+    BUFFER,
+    DAMAGED,
+    FEW_CENTRES,
+    TIP_RADIUS,
+    CrackBand,
+    band_elements,
+    nearest_distance,
+)
 from ngat.driver import run
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError, Parameters
@@ -21,6 +29,22 @@ def test_band_elements_are_those_within_the_radius():
     near = band_elements(coords, elements, diameter, np.array([[0.5, 0.5]]), 0.1)
     assert near.tolist() == [True, False]
     assert not band_elements(coords, elements, diameter, np.empty((0, 2)), 1.0).any()
+
+
+def test_few_centres_are_measured_as_the_k_d_tree_measures_them():
+    # Up to FEW_CENTRES centres (the crack tips) band_elements measures the distances itself:
+    # the same elements as the k-d tree's search, on a graded mesh with a few thousand of them.
+    scene = load_scene("two-slits")
+    state = ATState(scene.make_mesh(0.5), Parameters().model, scene.loads)
+    coords, elements, diameter = state.arrays.coords, state.arrays.elements, state.arrays.diameter
+    rng = np.random.default_rng(2)
+    for count in (1, 2, FEW_CENTRES):
+        centres = 6 * rng.random((count, 2))
+        for radius in (0.05, 0.3, 1.0):
+            direct = band_elements(coords, elements, diameter, centres, radius)
+            searched = band_elements(coords, elements, diameter, cKDTree(centres), radius)
+            np.testing.assert_array_equal(direct, searched)
+            assert direct.any()
 
 
 def test_nearest_distance_is_exact_within_each_bound():
