@@ -23,9 +23,13 @@ from scipy.sparse import csr_matrix
 
 from ngat.crack_density import CrackDensity
 from ngat.elasticity import AntiPlane, Elasticity
-from ngat.forms import MeshArrays, row_sum
+from ngat.forms import MeshArrays, Recall, row_sum
 
-__all__ = ["EdgeTopology", "flux_jumps", "mu_estimator", "nu_estimator", "meets"]
+__all__ = ["EdgeTopology", "flux_jumps", "mu_estimator", "nu_estimator", "meets", "MASKS"]
+
+MASKS = 4
+"""Vertex masks whose edges and elements an :class:`EdgeTopology` keeps: Ω_D, two held
+components of a plane model's u, and CR(t_k)."""
 
 
 class EdgeTopology:
@@ -82,6 +86,8 @@ class EdgeTopology:
         self.length = np.sqrt((tangent**2).sum(axis=1))
         self.normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / self.length[:, None]
         self._flux_jump = self._flux_jump_matrix(arrays)
+        self._arrays = arrays
+        self._recall = Recall(size=MASKS)
 
     @property
     def nedges(self) -> int:
@@ -130,8 +136,16 @@ class EdgeTopology:
         )
 
     def within(self, mask: np.ndarray) -> np.ndarray:
-        """Return the edges with both end points in the vertex mask, shape (nedges,)."""
-        return mask[self.first] & mask[self.second]
+        """Return the edges with both end points in the vertex mask, shape (nedges,).
+
+        Kept for the last few masks (Ω_D's, each held component's and CR(t_k) change with
+        the mesh or the load step only; :class:`ngat.forms.Recall`).
+        """
+        return self._recall("within", mask, lambda m: m[self.first] & m[self.second])
+
+    def meets(self, mask: np.ndarray) -> np.ndarray:
+        """Return :func:`meets` of the mesh and the vertex mask, kept like :meth:`within`."""
+        return self._recall("meets", mask, lambda m: meets(self._arrays, m))
 
     def element_sum(self, per_edge: np.ndarray) -> np.ndarray:
         """Return Σ_{e⊂∂T} per_edge[e] for every element T, shape (ne,).
@@ -279,7 +293,7 @@ def mu_estimator(
         per_edge += edges.length * (intact_jumps**2).sum(axis=1)
     per_edge[edges.within(dirichlet)] = 0.0
     indicators += h * edges.element_sum(per_edge)
-    indicators[meets(arrays, dirichlet)] = 0.0
+    indicators[edges.meets(dirichlet)] = 0.0
     return indicators
 
 
@@ -351,5 +365,5 @@ def nu_estimator(
     per_edge = surface.diffusion**2 * edges.length * edges.normal_flux_jump(v) ** 2
     per_edge[edges.within(crack)] = 0.0
     indicators += h * edges.element_sum(per_edge)
-    indicators[meets(arrays, crack)] = 0.0
+    indicators[edges.meets(crack)] = 0.0
     return indicators

@@ -44,15 +44,49 @@ __all__ = [
     "unique_keys",
     "MeshArrays",
     "LumpedAssembler",
+    "Recall",
     "RECALLED",
     "SAMPLE",
 ]
 
 RECALLED = 3
-"""Distinct inputs whose per-element quantities a mesh's arrays keep (:meth:`MeshArrays._recall`):
+"""Distinct inputs whose per-element quantities a mesh's arrays keep (:class:`Recall`):
 u, v and 1 − v, each asked for several times per iteration."""
 SAMPLE = 64
 """Stride of the entries compared before all of them, to reject a stored input cheaply."""
+
+
+class Recall:
+    """Per-mesh quantities of nodal values, kept for the last few distinct inputs.
+
+    An iteration asks for the same per-element quantity of u or v several times (the
+    half-step's matrix, both estimators, the energies of the tolerance and of the record),
+    each at 1–2 ms at 180k elements, while a comparison with a stored copy of the nodal values
+    costs 0.05 ms. Results are read-only, and equal inputs give the very numbers a new
+    evaluation would.
+
+    Parameters
+    ----------
+    size
+        Distinct inputs kept per quantity.
+    """
+
+    def __init__(self, size: int = RECALLED):
+        self.size = size
+        self._recent: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+
+    def __call__(self, name: str, values: np.ndarray, compute) -> np.ndarray:
+        """Return ``compute(values)``, or the result of an earlier call with equal values."""
+        recent = self._recent.setdefault(name, [])
+        for key, result in recent:
+            # A sample first: different fields (u, v, 1 − v) differ almost everywhere.
+            if np.array_equal(key[::SAMPLE], values[::SAMPLE]) and np.array_equal(key, values):
+                return result
+        result = compute(values)
+        result.flags.writeable = False
+        recent.insert(0, (np.array(values), result))
+        del recent[self.size :]
+        return result
 
 
 def vertex_rule() -> IntegrationRule:
@@ -310,7 +344,7 @@ class MeshArrays:
         )
         self.diameter = element_diameters(self.coords, self.elements)
         self._sizes_at: dict[tuple[float, float], float] = {}
-        self._recent: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._recall = Recall()
 
     def size_at(self, point: tuple[float, float]) -> float:
         """Return the largest diameter of the elements at the vertex nearest to ``point``.
@@ -347,26 +381,6 @@ class MeshArrays:
     def h2(self) -> np.ndarray:
         """Squared element diameters h_T²."""
         return self.diameter * self.diameter
-
-    def _recall(self, name: str, values: np.ndarray, compute) -> np.ndarray:
-        """Return ``compute(values)``, or the result of an earlier call with equal values.
-
-        An iteration asks for the same per-element quantity of u or v several times (the
-        half-step's matrix, both estimators, the energies of the tolerance and of the record),
-        each at 1–2 ms at 180k elements, while a comparison with a stored copy of the nodal
-        values costs 0.05 ms. The last :data:`RECALLED` distinct inputs are kept per quantity;
-        results are read-only, and equal inputs give the very numbers a new evaluation would.
-        """
-        recent = self._recent.setdefault(name, [])
-        for key, result in recent:
-            # A sample first: different fields (u, v, 1 − v) differ almost everywhere.
-            if np.array_equal(key[::SAMPLE], values[::SAMPLE]) and np.array_equal(key, values):
-                return result
-        result = compute(values)
-        result.flags.writeable = False
-        recent.insert(0, (np.array(values), result))
-        del recent[RECALLED:]
-        return result
 
     def gradient(self, values: np.ndarray) -> np.ndarray:
         """Return the constant gradient of a P1 function on every element, shape (ne, 2)."""
