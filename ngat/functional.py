@@ -143,7 +143,7 @@ class LumpedFunctional:
         surface = model.surface
         mass_term = area * (density.degraded_density(arrays, u) + model.gc * surface.reaction) / 3
         vv = 2 * model.gc * surface.diffusion * stiffness
-        vv[:, [0, 1, 2], [0, 1, 2]] += 2 * mass_term[:, None]
+        vv.reshape(arrays.ne, 9)[:, ::4] += 2 * mass_term[:, None]  # the diagonals, in place
         u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
         vu = (4 / 3) * area[:, None, None] * v[el][:, :, None] * u_flux[:, None, :]
         return uu, vv, vu

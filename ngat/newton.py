@@ -154,6 +154,7 @@ class NewtonSolver:
             + components[:, None] * degree[None]
             + graph.diagonal[None]
         ).ravel()
+        self._local = np.empty(len(self.position))
         self.inverse = None
         self.certified = 0.0
         self.rhs = self.matrix.CreateColVector()
@@ -164,7 +165,8 @@ class NewtonSolver:
         """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
         state = self.state
         uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts)
-        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()])
+        # Into one buffer per mesh: a new array of this size costs its page faults every time.
+        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()], out=self._local)
         return np.bincount(self.position, weights=local, minlength=self.nnz)
 
     def _factorise(self, crack: np.ndarray) -> tuple:
