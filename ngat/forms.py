@@ -471,13 +471,18 @@ class LumpedAssembler:
         self.arrays = arrays
         self.lumped = lumped
         self.stiffness = arrays.stiffness if stiffness is None else stiffness
+        self._weights: dict[tuple[int, ...], np.ndarray] = {}
         self.laplace = self._scatter(np.ones(arrays.ne))
 
     def _scatter(self, coefficient: np.ndarray, local: np.ndarray | None = None) -> np.ndarray:
         """Sum coefficient_T times the element matrices ``local`` (default: stiffness)."""
         local = self.stiffness if local is None else local
-        weights = (coefficient[:, None, None] * local).ravel()
-        return np.bincount(self.position, weights=weights, minlength=self.nnz)
+        # Into one buffer per shape: a new array of this size costs its page faults every time.
+        shape = (len(coefficient), *local.shape[1:])
+        if shape not in self._weights:
+            self._weights[shape] = np.empty(shape)
+        weights = np.multiply(coefficient[:, None, None], local, out=self._weights[shape])
+        return np.bincount(self.position, weights=weights.ravel(), minlength=self.nnz)
 
     def weighted_values(self, weights: list[np.ndarray], parts: list[np.ndarray]) -> np.ndarray:
         """Return the values of Σ_k Σ_T weights_k,T parts_k,T (an energy split's a_j).
