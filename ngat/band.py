@@ -131,7 +131,8 @@ def _count(centres: np.ndarray | cKDTree) -> int:
 def _tree(centres: np.ndarray) -> np.ndarray | cKDTree:
     """Return a ``cKDTree`` of the centres, for queries that share them.
 
-    None for up to :data:`FEW_CENTRES` of them, which :func:`band_elements` measures directly.
+    Up to :data:`FEW_CENTRES` centres are returned as they are: :func:`band_elements` measures
+    their distances directly.
     """
     return cKDTree(centres) if len(centres) > FEW_CENTRES else centres
 
