@@ -100,60 +100,72 @@ class NewtonSolver:
         self._arrays = None
 
     def _setup(self) -> None:
-        """Build the block graph, the scatter positions and the work vectors for this mesh.
+        """Build the lower triangle's graph, the scatter positions and the work vectors.
 
         The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model: c
         components, component-major) and of v (behind u's): every one of its (c + 1)² blocks
         has the graph G of the P1 space, whose positions of the element couplings the
-        assembler of b_j already holds (:class:`ngat.operators.LumpedOperators`). The block
-        graph is NGSolve's sparse product S G Sᵀ with S = [I; …; I] ((c + 1) n × n): G in
-        every block, CSR rows sorted (0.35 s at 180k elements, where an assembly of a form on
-        the product space took 0.85 s). So row (I, a) starts at I (c + 1) nnz(G) +
-        (c + 1) rowptr_G[a] and holds the columns of component J at J deg(a) + the position in
-        row a of G; each local entry's position follows by that arithmetic, without a search.
+        assembler of b_j already holds (:class:`ngat.operators.LumpedOperators`). NGSolve's
+        sparse Cholesky factorisation reads the entries on and below the diagonal only, so the
+        matrix stores just those: of block row I, the blocks J < I whole and the lower part L
+        of G in block I (the same factorisation to the last bit, half the entries to assemble
+        and copy; ``tests/test_solvers.py``). Its rows are sorted, and in a sorted row a of G
+        the columns b ≤ a come first, so row (I, a) starts at Σ_{I' < I} (I' nnz(G) + nnz(L))
+        + I rowptr_G[a] + rowptr_L[a] and holds column (J, b) at J deg(a) + the position of b
+        in row a of G: each local entry's position follows by that arithmetic, without a
+        search. The local entries above the diagonal go to a discarded slot behind the matrix.
         """
         state = self.state
         arrays = state.arrays
         c = state.elasticity.components
         operators = self.half_steps.operators
-        n = operators.b_matrix.height
-        rows = np.arange((c + 1) * n)
-        stack = sparse_from_coo(rows, rows % n, np.ones(len(rows)), (c + 1) * n, n)
-        self.matrix = stack @ operators.b_matrix @ stack.CreateTranspose()
+        graph = operators.b_assembler
+        self.stiffness_parts = operators.stiffness_parts
+        _, cols_g, rowptr_g = operators.b_matrix.CSR()
+        cols_g, rowptr_g = np.asarray(cols_g, dtype=np.int64), np.asarray(rowptr_g, np.int64)
+        n, degree = len(rowptr_g) - 1, np.diff(rowptr_g)
+        rows_g = np.repeat(np.arange(n), degree)
+        lower = cols_g <= rows_g
+        rowptr_l = np.concatenate([[0], np.cumsum(np.bincount(rows_g[lower], minlength=n))])
+        # Block (I, J ≤ I): G whole below the diagonal blocks, L on them.
+        blocks = [(i, j, np.s_[:] if j < i else lower) for i in range(c + 1) for j in range(i + 1)]
+        rows = np.concatenate([i * n + rows_g[part] for i, _, part in blocks])
+        self.matrix = sparse_from_coo(
+            rows,
+            np.concatenate([j * n + cols_g[part] for _, j, part in blocks]),
+            np.zeros(len(rows)),
+            (c + 1) * n,
+            (c + 1) * n,
+        )
         _, cols, rowptr = self.matrix.CSR()
-        cols, rowptr = np.asarray(cols, dtype=np.int64), np.asarray(rowptr, dtype=np.int64)
+        rowptr = np.asarray(rowptr, dtype=np.int64)
         self.nnz = len(cols)
         self.entry_rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
-        self.entry_cols = cols
-        # Positions in G (the P1 graph of b_j) of each element's vertex pairs, and G's rows.
-        self.stiffness_parts = operators.stiffness_parts
-        graph = operators.b_assembler
-        in_g = graph.position.reshape(arrays.ne, 3, 3)
-        _, _, rowptr_g = operators.b_matrix.CSR()
-        rowptr_g = np.asarray(rowptr_g, dtype=np.int64)
-        degree, block = np.diff(rowptr_g), (c + 1) * graph.nnz
-        el = arrays.elements
-        # Row (I, a), column (J, b): I·block + c·rowptr_G[a] + J·deg(a) + position of (a, b).
-        row_start = c * rowptr_g[el]  # (ne, 3)
+        self.entry_cols = np.asarray(cols, dtype=np.int64)
+        # Row (I, a), column (J ≤ I, b): first(I, a) + J deg(a) + position of (a, b) in G.
         components = np.arange(c + 1)
-        start = components[:, None, None] * block + row_start[None]  # (c + 1, ne, 3)
-        shift = components[:, None, None] * degree[el][None]  # (c + 1, ne, 3): J·deg(a)
-        # position[I, J][e, i, j] for the rows (I, el[e, i]) and columns (J, el[e, j]).
-        position = (
-            start[:, None, :, :, None] + shift[None, :, :, :, None] + in_g[None, None]
-        )  # (I, J, ne, 3, 3)
-        uu = position[:c, :c].transpose(2, 0, 3, 1, 4).reshape(arrays.ne, 3 * c, 3 * c)
-        vv = position[c, c]
-        vu = position[c, :c].transpose(1, 2, 0, 3).reshape(arrays.ne, 3, 3 * c)
-        # uv listed in vu's order: the entry (u_(J, b), v_a) for each (v_a, u_(J, b)).
-        uv = position[:c, c].transpose(1, 3, 0, 2).reshape(arrays.ne, 3, 3 * c)
-        self.position = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), uv.ravel()])
-        self.diagonal = (
-            components[:, None] * block
-            + c * rowptr_g[None, :-1]
-            + components[:, None] * degree[None]
-            + graph.diagonal[None]
-        ).ravel()
+        block_start = np.cumsum(np.concatenate([[0], components * graph.nnz + rowptr_l[-1]]))
+        first = block_start[:-1, None] + components[:, None] * rowptr_g[None, :-1]
+        first += (rowptr_l - rowptr_g)[None, :-1]  # (c + 1, n)
+        el, ne = arrays.elements, arrays.ne
+        in_g, degree_el = graph.position.reshape(ne, 3, 3), degree[el]
+        above = el[:, None, :] > el[:, :, None]  # (ne, 3, 3): b > a, above the diagonal of G
+        # In hessian_blocks' order: uu (ne, I, i, J, j), vv (ne, i, j) and vu (ne, i, J, j).
+        sizes = np.cumsum([0, ne * 9 * c * c, ne * 9, ne * 9 * c])
+        self.position = np.empty(sizes[-1], dtype=np.int64)
+        uu = self.position[sizes[0] : sizes[1]].reshape(ne, c, 3, c, 3)
+        vu = self.position[sizes[2] : sizes[3]].reshape(ne, 3, c, 3)
+        local_blocks = {(i, j): uu[:, i, :, j] for i in range(c) for j in range(c)}
+        local_blocks |= {(c, j): vu[:, :, j] for j in range(c)}
+        local_blocks[c, c] = self.position[sizes[1] : sizes[2]].reshape(ne, 3, 3)
+        for (i, j), out in local_blocks.items():  # block row i, block column j
+            if j > i:
+                out[...] = self.nnz
+                continue
+            np.add((first[i][el] + j * degree_el)[:, :, None], in_g, out=out)
+            if i == j:
+                np.copyto(out, self.nnz, where=above)
+        self.diagonal = (first + components[:, None] * degree[None] + graph.diagonal[None]).ravel()
         self._local = np.empty(len(self.position))
         self.inverse = None
         self.certified = 0.0
@@ -162,12 +174,12 @@ class NewtonSolver:
         self._arrays = arrays
 
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Return the values of ∇²I_j at (u, v) in the order of the block graph's entries."""
+        """Return the values of ∇²I_j at (u, v) on and below the diagonal, in the graph's order."""
         state = self.state
         uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts)
         # Into one buffer per mesh: a new array of this size costs its page faults every time.
-        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel(), vu.ravel()], out=self._local)
-        return np.bincount(self.position, weights=local, minlength=self.nnz)
+        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel()], out=self._local)
+        return np.bincount(self.position, weights=local, minlength=self.nnz + 1)[: self.nnz]
 
     def _factorise(self, crack: np.ndarray) -> tuple:
         """Assemble and factorise the projected Hessian at the state's (u, v).

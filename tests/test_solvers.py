@@ -11,6 +11,7 @@ import scipy.sparse as sp
 
 import ngat.minimization
 from ngat.driver import run
+from ngat.forms import sparse_from_coo
 from ngat.halfsteps import HalfStepSolvers
 from ngat.minimization import CRACKED, load_bearing_change
 from ngat.newton import NewtonSolver
@@ -25,6 +26,7 @@ from ngat.strategies import (
     nonlinear_strategy,
     remaining_iterations,
 )
+from ngat.threads import FixedThreads
 
 TIMES = np.array([0.0, 0.5, 1.0, 1.2, 1.3])  # the last two steps are in the growth phase
 
@@ -80,6 +82,38 @@ def test_newton_gradient_and_hessian_are_those_of_the_energy(assert_newton_match
     assert_newton_matches_ngsolve(state, u, rng.random(state.arrays.nv))
 
 
+def test_factorising_the_lower_triangle_is_factorising_the_hessian_to_the_last_bit():
+    # Newton's matrix stores ∇²I_j on and below the diagonal: NGSolve's sparse Cholesky
+    # factorisation reads no more, so it must solve exactly as with the whole Hessian.
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
+    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.3)
+    threads = FixedThreads()
+    try:
+        newton = NewtonSolver(state)
+        newton._factorise(state.crack_set())
+        values = newton.matrix.AsVector().FV().NumPy()
+        rows, cols = newton.entry_rows, newton.entry_cols
+        mirror = rows > cols
+        size = newton.matrix.height
+        hessian = sparse_from_coo(
+            np.concatenate([rows, cols[mirror]]),
+            np.concatenate([cols, rows[mirror]]),
+            np.concatenate([values, values[mirror]]),
+            size,
+            size,
+        )
+        assert hessian.nze > 1.8 * newton.matrix.nze
+        rhs = np.random.default_rng(3).random(size)
+        x = hessian.CreateColVector()
+        x.FV().NumPy()[:] = rhs
+        expected = (hessian.Inverse(inverse="sparsecholesky") * x).Evaluate().FV().NumPy()
+        assert np.array_equal(newton._apply_inverse(rhs), expected)
+    finally:
+        threads.restore()
+
+
 def test_pointwise_irreversibility_keeps_v_below_the_previous_step(tmp_path):
     scene = load_scene("two-slits")
     parameters, _ = scene.configure(
@@ -119,7 +153,8 @@ def test_negative_curvature_direction_has_the_curvature_it_reports():
     assert found is not None, "random (u, v) with small v should show negative curvature"
     direction, curvature = found
     values, cols, rowptr = map(np.asarray, newton.matrix.CSR())
-    hessian = sp.csr_matrix((values, cols, rowptr), newton.matrix.shape)
+    lower = sp.csr_matrix((values, cols, rowptr), newton.matrix.shape)
+    hessian = lower + sp.triu(lower.T, k=1)
     assert curvature < 0
     assert direction @ hessian @ direction == pytest.approx(curvature, rel=1e-8)
     assert not np.any(direction[held])
