@@ -58,7 +58,7 @@ class LumpedOperators:
             self.a_matrix = graph_matrix(arrays, density.components)
             self.assembler = LumpedAssembler(
                 arrays, self.a_matrix, model.lumping,
-                density.element_dofs(arrays), density.element_stiffness(arrays),
+                density.components, density.element_stiffness(arrays),
             )  # fmt: skip
             self.stiffness_parts = density.parts(arrays)
             if density.components == 1:

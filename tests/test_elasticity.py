@@ -7,7 +7,16 @@ from ngsolve import CF, Integrate, x, y
 from ngat.crack_density import crack_density
 from ngat.elasticity import PlaneElasticity, elasticity, lame
 from ngat.estimators import nu_estimator
-from ngat.forms import LumpedAssembler, a_form, b_form, exact_dx, lumped_dx
+from ngat.forms import (
+    LumpedAssembler,
+    MeshArrays,
+    a_form,
+    b_form,
+    exact_dx,
+    graph_matrix,
+    graph_positions,
+    lumped_dx,
+)
 from ngat.geometry import generate_mesh, glue, rectangle
 from ngat.halfsteps import HalfStepSolvers
 from ngat.minimization import alternating_minimization
@@ -69,7 +78,7 @@ def test_vector_assembly_equals_ngsolve_forms(lumped):
     ).Assemble()
     arrays = state.arrays
     vector = LumpedAssembler(
-        arrays, a.mat, lumped, density.element_dofs(arrays), density.element_stiffness(arrays)
+        arrays, a.mat, lumped, density.components, density.element_stiffness(arrays)
     )
     reference = a.mat.AsVector().FV().NumPy()
     ours = vector.a_values(state.v_values, 1e-5)
@@ -103,6 +112,27 @@ def test_operators_write_the_forms_into_their_own_graph(model):
         reference = form.AsVector().FV().NumPy()
         values = ours.AsVector().FV().NumPy()
         np.testing.assert_allclose(values, reference, atol=1e-12 * abs(reference).max())
+
+
+@pytest.mark.parametrize("components", [1, 2])
+def test_graph_positions_are_where_a_search_of_the_graph_finds_the_couplings(components):
+    # graph_positions computes every element coupling's entry from the edge numbers; a search
+    # of the couplings' keys among the sorted rows of graph_matrix must find the same entries.
+    mesh = framed_square(0.25)
+    mesh.Refine()
+    arrays = MeshArrays(mesh)
+    position, diagonal = graph_positions(arrays, components)
+    matrix = graph_matrix(arrays, components)  # CSR() views the matrix's memory
+    _, cols, rowptr = (np.asarray(a, dtype=np.int64) for a in matrix.CSR())
+    n = len(rowptr) - 1
+    keys = np.repeat(np.arange(n), np.diff(rowptr)) * n + cols
+    dofs = np.hstack([arrays.elements + k * arrays.nv for k in range(components)])
+    local = dofs[:, :, None] * n + dofs[:, None, :]
+    np.testing.assert_array_equal(position, np.searchsorted(keys, local))
+    np.testing.assert_array_equal(keys[position], local)
+    np.testing.assert_array_equal(keys[diagonal], np.arange(n) * (n + 1))
+    with pytest.raises(ValueError, match="build it with graph_matrix"):
+        LumpedAssembler(arrays, graph_matrix(arrays, components + 1), components=components)
 
 
 @pytest.mark.parametrize("model", ["plane_strain", "plane_stress"])
