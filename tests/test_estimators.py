@@ -7,8 +7,6 @@ energy error and μ converge at ndof^(−1/4) under uniform and at ndof^(−1/2)
 Dörfler refinement with a bounded effectivity index; on smooth-laplace μ decays like h.
 """
 
-import time
-
 import numpy as np
 import pytest
 from ngsolve import (
@@ -30,7 +28,7 @@ from ngsolve import (
 )
 
 from ngat.crack_density import crack_density
-from ngat.estimators import EdgeTopology, meets, mu_estimator, nu_estimator
+from ngat.estimators import EdgeTopology, mu_estimator, nu_estimator
 from ngat.forms import MeshArrays, row_sum
 from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
 from ngat.halfsteps import HalfStepSolvers
@@ -324,43 +322,6 @@ def test_smooth_uniform_refinement_mu_decays_like_h(phase_field):
         assert abs(_fit(h, error) - 1) < 0.1
         effectivity = mu / error
         assert effectivity.max() / effectivity.min() < 1.2
-
-
-# -- cost ----------------------------------------------------------------------------------------
-@pytest.mark.slow
-def test_estimator_cost_against_one_alternating_minimisation_iteration():
-    """Print the cost of μ and ν at ~80k elements against one u-step plus one v-step."""
-    scene = load_scene("two-slits")
-    mesh = scene.make_mesh(0.25)
-    while mesh.ne < 80_000:
-        mesh.Refine()
-    state = ATState(mesh, ModelParameters(), scene.loads)
-    steps = HalfStepSolvers(state)
-    state.apply_load(1.0)
-    crack = state.crack_set()
-    timings = {}
-    for attempt in ("first", "again"):
-        start = time.perf_counter()
-        steps.solve_u()
-        steps.solve_v(crack)
-        timings[f"u+v solve ({attempt})"] = time.perf_counter() - start
-    start = time.perf_counter()
-    edges = EdgeTopology(state.arrays)
-    timings["EdgeTopology"] = time.perf_counter() - start
-    start = time.perf_counter()
-    mu = mu_estimator(
-        state.arrays, edges, state.u_values, state.v_values, state.model.eta, state.dirichlet
-    )
-    timings["mu"] = time.perf_counter() - start
-    start = time.perf_counter()
-    nu = nu_estimator(
-        state.arrays, edges, state.u_values, state.v_values, state.model.surface, crack
-    )
-    timings["nu"] = time.perf_counter() - start
-    print(f"{mesh.ne} elements:", {k: f"{t:.3f} s" for k, t in timings.items()})
-    assert mu.shape == nu.shape == (mesh.ne,)
-    assert np.isfinite(mu).all() and np.isfinite(nu).all()
-    assert not meets(state.arrays, crack).all()
 
 
 def test_element_sums_are_row_sums_of_the_gathered_edges_to_the_last_bit():

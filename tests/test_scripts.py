@@ -59,6 +59,21 @@ def test_bench_steps_quick(tmp_path):
     assert bench["checkpoint_bytes"] < 100_000  # the state of a 348-element mesh, no records
 
 
+def test_bench_estimators_on_a_small_mesh(tmp_path):
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "bench_estimators.py"), "--elements", "2000",
+            "--repeats", "1", "--out", str(tmp_path),
+        ],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    bench = json.loads((tmp_path / "bench.json").read_text())
+    assert bench["elements"] >= 2000
+    assert set(bench["median_s"]) == {"u-step + v-step", "edge topology", "μ", "ν"}
+    assert all(seconds > 0 for seconds in bench["median_s"].values())
+    assert (tmp_path / "bench.png").stat().st_size > 5_000
+
+
 @pytest.mark.skipif(not (ROOT / ".git").exists(), reason="needs a git checkout")
 def test_bench_paper_against_the_same_revision(tmp_path):
     # HEAD against HEAD: the same code on both sides, so the deterministic figures agree. The
