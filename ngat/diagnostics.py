@@ -125,6 +125,11 @@ class Diagnostics:
             if raise_now:
                 self.raise_if_error()
 
+    @property
+    def pending(self) -> bool:
+        """Whether an error reported with ``raise_now=False`` waits for :meth:`raise_if_error`."""
+        return self._pending is not None
+
     def raise_if_error(self) -> None:
         """Raise :class:`ProblemError` for an error reported with ``raise_now=False``."""
         if self._pending is not None:

@@ -3,8 +3,9 @@
 For k = 0, 1, …: CR(t_k) = {v(t_{k−1}) < CRTOL} (paper, Section 1.2), u = g(t_k) on Ω_D, the
 alternating minimisation from v(t_{k−1}) (Algorithm 1), then the energies (eq. 7), reaction
 forces, mesh measures and timings go to ``energies.csv``, the fields (every ``output_every``-th
-step and the last) to ``fields.pvd``, and the state to the checkpoint; what a step writes does
-not grow with the steps before it.
+step and the last) to ``fields.pvd``, and the state to the checkpoint (every
+``checkpoint_every`` seconds, after the last step and before an error ends the run); what a
+step writes does not grow with the steps before it.
 A run holds its folder's lock throughout (:mod:`ngat.lock`), and however it ends its
 ``summary.json`` records how: ``completed``, ``interrupted`` (KeyboardInterrupt: SIGINT, or
 SIGTERM by the command line) or ``failed: ERROR`` — unless the disk is too full even for that.
@@ -88,7 +89,7 @@ def signals_held() -> Iterator[None]:
     """Hold SIGINT and SIGTERM back until the block ends, then deliver the first one.
 
     Around the writes of a load step: its row, fields and checkpoint are written whole or not
-    at all, and an interrupted run's summary and checkpoint agree on its last finished step.
+    at all.
     Python handles signals in the main thread only; elsewhere (a sweep's worker) this does
     nothing.
     """
@@ -239,6 +240,7 @@ def _run_locked(
         )
         remesher = tip_remesher(scene, parameters)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
+        checkpointed = time.perf_counter()
         for k, t in enumerate(times):
             if k < len(result.records):
                 continue
@@ -300,12 +302,17 @@ def _run_locked(
             with signals_held():
                 with timer("output"):
                     writer.write_step(record, state.mesh, fields)
-                summary["timing"] = timer.summary()
-                summary["diagnostics"] = diagnostics.summary()
-                with timer("checkpoint"):
-                    save_checkpoint(folder, state, half_steps, k, summary)
-                # A step counts as finished once its checkpoint is written (--resume goes on
-                # there); the records of a failed write do not hold it.
+                if diagnostics.pending or output.checkpoint_due(
+                    k, len(times), time.perf_counter() - checkpointed
+                ):
+                    summary["timing"] = timer.summary()
+                    summary["diagnostics"] = diagnostics.summary()
+                    with timer("checkpoint"):
+                        writer.sync()  # the rows before the checkpoint that counts them
+                        save_checkpoint(folder, state, half_steps, k, summary)
+                    checkpointed = time.perf_counter()
+                # The records of a failed write do not hold the step; --resume goes on from
+                # the last checkpoint and computes the steps after it again.
                 result.records.append(record)
             log.info(
                 "step %d t=%.4g: %d iterations, total %.6g, %d elements",

@@ -462,10 +462,6 @@ class ResultsWriter:
                 if new_file:
                     writer.writeheader()
                 writer.writerow(record)
-                # Synced: a checkpoint written after this row must never be ahead of the
-                # rows, not even after a power failure (--resume reads the rows back).
-                f.flush()
-                os.fsync(f.fileno())
         except BaseException:
             with contextlib.suppress(OSError):
                 if size:
@@ -473,6 +469,20 @@ class ResultsWriter:
                 else:
                     self.csv_path.unlink()
             raise
+
+    def sync(self) -> None:
+        """Force the rows of ``energies.csv`` to the disk (before a checkpoint that counts them).
+
+        A checkpoint must never be ahead of the rows, not even after a power failure: a
+        resumed run reads them back (:func:`ngat.checkpoint.restore_energies`).
+
+        Raises
+        ------
+        OutputError
+            If the sync fails (see :func:`writing`).
+        """
+        with writing(self.folder), open(self.csv_path, "rb") as f:
+            os.fsync(f.fileno())
 
     def write_summary(self, summary: dict[str, Any]) -> None:
         """Replace ``summary.json`` atomically.

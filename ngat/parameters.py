@@ -440,9 +440,17 @@ class OutputParameters:
     output_every
         Write the fields (a VTU in ``fields.pvd``) of every ``output_every``-th load step
         (steps 0, k, 2k, …) and of the last one; ``energies.csv`` gets every step.
+    checkpoint_every
+        Seconds of wall time between checkpoints: a load step writes one once this long has
+        passed since the last one, and the last step and a step that ends the run with an
+        error always do; 0 writes one after every step. A run killed in between resumes from
+        its last checkpoint and computes the steps after it again, to the same numbers, so it
+        loses at most this long and the step it was in. On small meshes the two fsyncs of a
+        checkpoint (the rows, then the state) cost more than the step itself.
     """
 
     output_every: int = 1
+    checkpoint_every: float = 10.0
 
     def check(self) -> None:
         """Raise :class:`ParameterError` naming the first invalid value."""
@@ -451,6 +459,23 @@ class OutputParameters:
                 f"output_every must be >= 1, got output_every={self.output_every}: "
                 "1 writes the fields of every step"
             )
+        if not self.checkpoint_every >= 0:
+            raise ParameterError(
+                f"checkpoint_every must be >= 0 seconds, got "
+                f"checkpoint_every={self.checkpoint_every}: 0 writes a checkpoint after every step"
+            )
+
+    def checkpoint_due(self, step: int, steps: int, since: float) -> bool:
+        """Return whether load step ``step`` of ``steps`` writes the checkpoint.
+
+        Parameters
+        ----------
+        step, steps
+            The step just finished and the number of steps.
+        since
+            Seconds since the last checkpoint (or the start of the run).
+        """
+        return step == steps - 1 or since >= self.checkpoint_every
 
     def writes_fields(self, step: int, steps: int) -> bool:
         """Return whether load step ``step`` of ``steps`` writes its fields."""
@@ -556,6 +581,7 @@ class Parameters:
 LEGACY_VALUES: dict[str, Any] = {
     "am_stop": "change",
     "band_search": 1.0,
+    "checkpoint_every": 0.0,
     "crack_extension": False,
     "predictor": False,
     "remesh_radius": 0.0,

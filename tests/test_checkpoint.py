@@ -34,7 +34,8 @@ SCENE = """
         base,
         name="two-slits-short",
         quick={"times": np.round(np.arange(0.0, 2.41, 0.05), 10), "eps": 0.2, "maxh": 0.5,
-               "floor": 0.2, "band_h": 0.45, "crtol": 0.05, "tol": 0.4},
+               "floor": 0.2, "band_h": 0.45, "crtol": 0.05, "tol": 0.4,
+               "checkpoint_every": 0},  # killed between any two steps: a checkpoint each
     )
     """
 TIMING = {"wall_s"}

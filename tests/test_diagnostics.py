@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from ngat.checkpoint import load_checkpoint
 from ngat.diagnostics import ProblemError
 from ngat.driver import run
 from ngat.geometries.obtuse_line import scene as OBTUSE
@@ -154,9 +155,13 @@ def test_nan_stops_the_run_and_is_named(tmp_path, monkeypatch):
     assert len(rows) == 2, "the step before the NaN is kept"
 
 
-def test_on_problem_error_stops_after_writing_the_step(tmp_path):
-    scene, parameters, times = coarse_two_slits(am_max_iter=2, eps=1.0, on_problem="error")
+def test_on_problem_error_stops_after_writing_the_step_and_its_checkpoint(tmp_path):
+    scene, parameters, _ = coarse_two_slits(
+        am_max_iter=2, eps=1.0, on_problem="error", checkpoint_every=1e9
+    )
     with pytest.raises(ProblemError, match="not-converged"):
-        run(scene, parameters, times, tmp_path / "run")
+        run(scene, parameters, np.array([0.0, 1.5, 1.6]), tmp_path / "run")
     rows = (tmp_path / "run" / "energies.csv").read_text().strip().splitlines()
     assert len(rows) == 3
+    # Long before the next checkpoint is due, but the error ends the run: its step is kept.
+    assert load_checkpoint(tmp_path / "run").step == 1

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import ngat
-from ngat.checkpoint import load_checkpoint
+from ngat.checkpoint import finished_steps, load_checkpoint
 from ngat.cli import main
 from ngat.driver import run
 from ngat.scene import SceneCodeError, load_scene
@@ -40,9 +40,10 @@ STEPS = """
 
     from ngat.geometries.profile_1d import scene as base
 
+    # A checkpoint after every step: the tests below stop the run between any two.
     scene = dataclasses.replace(
         base, name="profile-steps", times=np.linspace(0.0, 1.0, 40),
-        quick={"maxh": 0.05, "eps": 0.1},
+        quick={"maxh": 0.05, "eps": 0.1}, parameters={**base.parameters, "checkpoint_every": 0},
     )
     """
 
@@ -152,6 +153,34 @@ def test_an_interrupted_run_records_its_status_and_last_finished_step(interrupte
     assert summary["steps"] == 3 and summary["final"]["step"] == 2
     assert load_checkpoint(interrupted).step == 2
     assert hidden_files(interrupted) == []
+
+
+def test_a_run_between_checkpoints_resumes_from_the_last_and_repeats_the_steps_after_it(
+    steps, tmp_path
+):
+    # With checkpoint_every longer than the run only the last step writes a checkpoint: a run
+    # stopped after step 5 has rows and fields of six steps and no checkpoint, and resumed it
+    # computes every step again, to the same rows and a complete fields.pvd.
+    scene_file, _, expected = steps
+    scene = load_scene(str(scene_file))
+    parameters, times = scene.configure(quick=True, overrides={"checkpoint_every": 1e9})
+    folder = tmp_path / "D"
+    checkpointed = []
+
+    def stop(record):
+        checkpointed.append(finished_steps(folder))
+        if record["step"] == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run(scene, parameters, times, folder, on_step=stop)
+    assert checkpointed == [0] * 6 and row_count(folder) == 6
+    assert summary_of(folder)["steps"] == 6
+    run(scene, parameters, times, folder, resume=True)
+    assert read_rows(folder) == expected
+    assert load_checkpoint(folder).step == len(expected) - 1
+    series = (folder / "fields.pvd").read_text()
+    assert series.count("<DataSet") == len(expected) == len(list((folder / "fields").iterdir()))
 
 
 @pytest.mark.parametrize("damage", ["truncated", "bit-flipped"])

@@ -23,7 +23,8 @@ from ngat.parameters import ParameterError
 from ngat.results import read_records
 from ngat.scene import load_scene
 
-TINY = {"maxh": 0.5, "eps": 0.2, "adapt": "fixed", "resolve_eps": False}
+# A checkpoint after every step: part of what a step writes.
+TINY = {"maxh": 0.5, "eps": 0.2, "adapt": "fixed", "resolve_eps": False, "checkpoint_every": 0}
 
 
 def tiny_scene(steps, **changes):

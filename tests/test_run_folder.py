@@ -17,7 +17,10 @@ from ngat.scene import load_scene
 SCENE = """
     import dataclasses
     from ngat.geometries.profile_1d import scene as base
-    scene = dataclasses.replace(base, name="profile-steps", times=[0.0, 0.1, 0.2, 0.3])
+    scene = dataclasses.replace(
+        base, name="profile-steps", times=[0.0, 0.1, 0.2, 0.3],
+        parameters={**base.parameters, "checkpoint_every": 0},
+    )
     """
 PAUSE = 0.5
 
