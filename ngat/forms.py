@@ -370,6 +370,8 @@ class MeshArrays:
     ----------
     elements : (ne, 3) int array
         Vertex (= P1 DOF) numbers of each triangle.
+    material : (ne,) int array
+        Material number of each triangle (its position in ``mesh.GetMaterials()``).
     coords : (nv, 2) array
         Vertex coordinates.
     area : (ne,) array
@@ -386,7 +388,9 @@ class MeshArrays:
 
     def __init__(self, mesh: ngsolve.Mesh):
         ngmesh = mesh.ngmesh
-        self.elements = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+        triangles = ngmesh.Elements2D().NumPy()
+        self.elements = triangles["nodes"][:, :3].astype(np.int64) - 1
+        self.material = triangles["index"].astype(np.int64) - 1
         self.coords = ngmesh.Coordinates()[:, :2].copy()
         self.nv = len(self.coords)
         self.ne = len(self.elements)

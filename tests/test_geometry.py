@@ -45,3 +45,23 @@ def test_dirichlet_region_is_a_material():
     left = state.region_dofs["left"]
     assert np.all(state.arrays.coords[left, 0] <= 1e-12)
     assert np.isclose(state.arrays.coords[left, 0].min(), -0.5)
+
+
+@pytest.mark.parametrize("name", ["two-slits", "sent", "profile-1d"])
+def test_region_vertices_are_the_dofs_ngsolve_gives_the_regions(name):
+    # The loads' regions (materials of two-slits, boundaries of sent, a boundary of the 1-D
+    # profile) and a crack named by a region come from the element arrays; they must be the
+    # DOFs of fes.GetDofs.
+    scene = load_scene(name)
+    parameters, _ = scene.configure(quick=True)
+    mesh = scene.make_mesh(parameters.adaptivity.maxh)
+    mesh.Refine()
+    state = ATState(mesh, parameters.model, scene.loads, scene.crack)
+    for region in scene.loads:
+        kind = mesh.Materials if region in mesh.GetMaterials() else mesh.Boundaries
+        expected = np.array(state.fes.GetDofs(kind(region)), dtype=bool)
+        np.testing.assert_array_equal(state.region_vertices[region], expected)
+        assert expected.any() and not expected.all()
+        # A scene's crack given as a region's name: v = 0 there from the start.
+        cracked = ATState(mesh, parameters.model, scene.loads, region)
+        np.testing.assert_array_equal(cracked.initial_crack, expected)
