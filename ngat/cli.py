@@ -13,6 +13,7 @@ with one line saying how to continue it and the shell's status for a signal, 128
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import shlex
 import signal
@@ -65,6 +66,27 @@ def _signal_of(interrupt: KeyboardInterrupt) -> signal.Signals:
     return signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT
 
 
+def interrupted_steps(folder: Path, steps: int) -> str:
+    """Say how far an interrupted run came: its checkpoint's steps, and the steps after them.
+
+    A run writes its checkpoint every ``checkpoint_every`` seconds, so the steps it finished
+    (the rows of ``energies.csv``, counted in ``summary.json``) may go beyond its checkpoint;
+    ``--resume`` computes those again.
+    """
+    done = finished_steps(folder)
+    try:
+        computed = json.loads((folder / "summary.json").read_text())["steps"]
+    except (OSError, ValueError, KeyError):
+        computed = done
+    text = f"after {done} of {steps} load steps"
+    if computed > done:
+        text = (
+            f"after {computed} of {steps} load steps (its checkpoint holds {done}: --resume "
+            f"computes the {computed - done} after it again)"
+        )
+    return text
+
+
 def parse_settings(items: list[str]) -> dict[str, str]:
     """Turn ``["eps=0.05", ...]`` into a dictionary; reject items without ``=`` or given twice."""
     settings = {}
@@ -108,8 +130,8 @@ def command_run(args: argparse.Namespace, console: Console) -> int:
             command = ["ngat", "run", args.scene, *(["--quick"] if args.quick else [])]
             command += [word for item in args.set for word in ("--set", item)]
             console.print(
-                f"ngat: interrupted by {_signal_of(interrupt).name} after "
-                f"{finished_steps(plan.folder)} of {len(plan.times)} load steps; continue with "
+                f"ngat: interrupted by {_signal_of(interrupt).name} "
+                f"{interrupted_steps(plan.folder, len(plan.times))}; continue with "
                 f"{shlex.join([*command, '--resume', str(plan.folder)])}",
                 markup=False,
                 highlight=False,

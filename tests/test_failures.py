@@ -26,6 +26,7 @@ import pytest
 import ngat
 from ngat.checkpoint import finished_steps, load_checkpoint
 from ngat.cli import main
+from ngat.diagnostics import Diagnostics
 from ngat.driver import run
 from ngat.scene import SceneCodeError, load_scene
 
@@ -181,6 +182,32 @@ def test_a_run_between_checkpoints_resumes_from_the_last_and_repeats_the_steps_a
     assert load_checkpoint(folder).step == len(expected) - 1
     series = (folder / "fields.pvd").read_text()
     assert series.count("<DataSet") == len(expected) == len(list((folder / "fields").iterdir()))
+
+
+def test_an_interrupt_between_checkpoints_says_which_steps_resume_computes_again(
+    steps, tmp_path, monkeypatch, capsys
+):
+    scene, command, expected = steps
+    folder = tmp_path / "D"
+    finished = []
+
+    def interrupt_after_step_4(self):
+        finished.append(len(finished))
+        if finished[-1] == 4:
+            raise KeyboardInterrupt
+
+    # The end of a step, after its row and fields: where Ctrl-C between two steps lands.
+    monkeypatch.setattr(Diagnostics, "raise_if_error", interrupt_after_step_4)
+    settings = ["--set", "checkpoint_every=1e9"]
+    assert main([*command, *settings, "--out", str(folder)]) == 128 + signal.SIGINT
+    monkeypatch.undo()
+    assert one_line(capsys) == (
+        f"ngat: interrupted by SIGINT after 5 of {len(expected)} load steps (its checkpoint "
+        f"holds 0: --resume computes the 5 after it again); continue with ngat run {scene} "
+        f"--quick --set checkpoint_every=1e9 --resume {folder}"
+    )
+    assert main([*command, *settings, "--resume", str(folder)]) == 0
+    assert read_rows(folder) == expected
 
 
 @pytest.mark.parametrize("damage", ["truncated", "bit-flipped"])
