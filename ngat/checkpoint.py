@@ -1,8 +1,11 @@
-"""Checkpoints: after each load step, everything a resumed run needs to continue exactly.
+"""Checkpoints: after a load step, everything a resumed run needs to continue exactly.
+
+A run writes one once ``checkpoint_every`` seconds have passed since the last, after its last
+step and before an error ends it (:class:`ngat.parameters.OutputParameters`).
 
 A checkpoint is one file, ``checkpoint.npz`` in the results folder, written to a temporary file
 and renamed over the old one, so a run killed at any moment leaves either the previous or the new
-checkpoint, complete. It holds the state after the last finished step, and nothing that grows
+checkpoint, complete. It holds the state after the step it was written at, and nothing that grows
 with the number of steps: the step, the summary entries a resumed run carries on
 (:data:`CARRIED`), the nodal values of u, v and the previous step's v (which defines CR), the
 lagged Cholesky factorisations' matrix values (they outlive a load step, see
@@ -379,8 +382,10 @@ def restore_state(state: ATState, half_steps: HalfStepSolvers, checkpoint: Check
 def restore_energies(folder: Path, step: int) -> list[dict[str, Any]]:
     """Cut ``energies.csv`` back to the rows of steps 0, …, ``step``; return their records.
 
-    A run writes a step's row before its checkpoint, so the file may hold one row more (whole
-    or cut short by a crash), which is dropped; the rows kept are the file's own bytes.
+    A run writes a step's row before its checkpoint, and checkpoints every
+    ``checkpoint_every`` seconds, so the file may hold rows of the steps after the checkpoint
+    (the last one whole or cut short by a crash), which are dropped and computed again; the
+    rows kept are the file's own bytes.
 
     Raises
     ------
