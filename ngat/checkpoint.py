@@ -45,7 +45,7 @@ from ngat.output import (
     write_atomic,
     writing,
 )
-from ngat.parameters import with_legacy_values
+from ngat.parameters import computing, with_legacy_values
 from ngat.remesh import Patch, splice
 from ngat.results import parse_records
 from ngat.state import ATState
@@ -286,9 +286,9 @@ def check_identity(
     checkpoint: Checkpoint, scene: str, parameters: dict[str, Any], times: Sequence[float]
 ) -> None:
     """Raise :class:`OutputError` unless the checkpoint belongs to this scene and parameters."""
-    ours = {"scene": scene, "parameters": parameters, "times": times_summary(times)}
+    ours = {"scene": scene, "parameters": computing(parameters), "times": times_summary(times)}
     theirs = dict(checkpoint.identity)
-    theirs["parameters"] = with_legacy_values(theirs.get("parameters", {}))
+    theirs["parameters"] = computing(with_legacy_values(theirs.get("parameters", {})))
     differ = [key for key in ours if theirs.get(key) != ours[key]]
     if differ:
         raise OutputError(

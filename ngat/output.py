@@ -29,7 +29,7 @@ import ngsolve
 import numpy as np
 
 from ngat.band import mesh_geometry
-from ngat.parameters import with_legacy_values
+from ngat.parameters import computing, with_legacy_values
 
 __all__ = [
     "ResultsWriter",
@@ -160,8 +160,9 @@ def check_results_folder(
             f"cannot resume '{folder}': it holds a run of scene '{summary['scene']}', not "
             f"'{scene}'; give the same scene or another folder"
         )
-    theirs = _identity(with_legacy_values(summary.get("parameters", {})), summary.get("times", {}))
-    ours = _identity(parameters, times_summary(times))
+    recorded = with_legacy_values(summary.get("parameters", {}))
+    theirs = _identity(computing(recorded), summary.get("times", {}))
+    ours = _identity(computing(parameters), times_summary(times))
     differ = [
         f"{key}: {theirs.get(key)} there, {ours.get(key)} here"
         for key in sorted(theirs.keys() | ours.keys())

@@ -581,13 +581,17 @@ class Parameters:
 LEGACY_VALUES: dict[str, Any] = {
     "am_stop": "change",
     "band_search": 1.0,
-    "checkpoint_every": 0.0,
     "crack_extension": False,
     "predictor": False,
     "remesh_radius": 0.0,
 }
 """What the package did in place of a parameter before it existed: a run folder recorded then
 (``summary.json``, checkpoint) does not name it, and resuming it compares these values."""
+
+
+WRITING_ONLY = frozenset({"checkpoint_every"})
+"""Parameters that decide when a run writes, not what it computes: a resumed run may change
+them (and a run recorded before one existed resumes whatever it is)."""
 
 
 def with_legacy_values(recorded: Mapping[str, Any]) -> dict[str, Any]:
@@ -599,3 +603,8 @@ def with_legacy_values(recorded: Mapping[str, Any]) -> dict[str, Any]:
         Flat parameters as a run folder stores them (:meth:`Parameters.flat`).
     """
     return {**LEGACY_VALUES, **recorded}
+
+
+def computing(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the flat parameters without :data:`WRITING_ONLY`: what a resumed run must share."""
+    return {key: value for key, value in flat.items() if key not in WRITING_ONLY}

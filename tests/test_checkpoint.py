@@ -178,3 +178,29 @@ def test_resume_of_a_run_recorded_before_a_parameter_existed(tmp_path):
     assert "crack_extension" not in str(error.value)
     legacy = {**now, "am_stop": "change"}
     assert check_results_folder(tmp_path, "s", legacy, times, mode="resume") == summary
+
+
+@pytest.mark.parametrize("recorded", [None, 0.0, 1e9], ids=["before it existed", "0", "1e9"])
+def test_a_resumed_run_may_checkpoint_at_another_interval(tmp_path, recorded):
+    # checkpoint_every decides when a run writes, not what it computes: neither the summary's
+    # nor the checkpoint's parameters refuse a resume that changes it, or a folder without it.
+    from types import SimpleNamespace
+
+    from ngat.checkpoint import check_identity
+    from ngat.output import OutputError, check_results_folder, times_summary
+    from ngat.parameters import Parameters
+
+    times = [0.0, 0.1, 0.2]
+    parameters = Parameters().flat()
+    if recorded is None:
+        del parameters["checkpoint_every"]
+    else:
+        parameters["checkpoint_every"] = recorded
+    identity = {"scene": "s", "parameters": parameters, "times": times_summary(times)}
+    summary = {**identity, "status": "running"}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    now = Parameters().flat()
+    assert check_results_folder(tmp_path, "s", now, times, mode="resume") == summary
+    check_identity(SimpleNamespace(identity=identity), "s", now, times)
+    with pytest.raises(OutputError, match="eps: 0.05 there, 0.1 here"):
+        check_results_folder(tmp_path, "s", {**now, "eps": 0.1}, times, mode="resume")
