@@ -1,0 +1,255 @@
+"""Sparse symmetric factorisations by MKL PARDISO: ordering once per graph, values many times.
+
+Alternating minimisation refactorises the matrices of a_j and b_j twice per iteration on a
+fixed graph, and Newton's method its Hessian once per step. PARDISO's supernodal L D Lᵀ
+factorisation and back-substitution are faster on these meshes than NGSolve's sparse Cholesky
+(``docs/paper-example.md`` has the measured ratios), and its factorisation of a symmetric
+indefinite matrix counts the negative eigenvalues (Sylvester's law of inertia), which tells
+Newton's method whether its Hessian has negative curvature at all.
+
+NGSolve registers an ``inverse="pardiso"`` of its own when the ``mkl`` wheel is installed (and
+makes it the default of ``Inverse()``); it extracts the upper triangle and copies the matrix on
+every factorisation and refines every solution iteratively, which made it no faster than the
+sparse Cholesky here. :class:`Pardiso` takes the upper triangle's graph once and its values as
+an array. MKL comes from the ``mkl`` wheel (x86-64 only); without it :data:`AVAILABLE` is false
+and ngat uses NGSolve's sparse Cholesky.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.metadata
+import weakref
+
+import numpy as np
+from ngsolve import BitArray
+from ngsolve.la import BaseMatrix, BaseVector, SparseMatrixd
+
+__all__ = ["AVAILABLE", "Pardiso", "PardisoError", "PardisoInverse", "sparse_inverse"]
+
+
+def _load_mkl() -> ctypes.CDLL | None:
+    """Return MKL's runtime library from the ``mkl`` wheel, or ``None`` if it is not installed."""
+    try:
+        files = importlib.metadata.distribution("mkl").files or []
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    for file in files:
+        if "mkl_rt" in file.name:
+            try:
+                return ctypes.CDLL(str(file.locate()))
+            except OSError:
+                return None
+    return None
+
+
+# Loaded at import, with the OpenMP library MKL's threading layer loads on first use, so that
+# the thread limits of ngat.threads reach both.
+_MKL = _load_mkl()
+AVAILABLE = _MKL is not None
+"""Whether MKL PARDISO can be used."""
+if _MKL is not None:
+    _MKL.MKL_Get_Max_Threads()
+
+_INT = ctypes.POINTER(ctypes.c_int32)
+if _MKL is not None:
+    _MKL.pardisoinit.restype = None
+    _MKL.pardisoinit.argtypes = [ctypes.c_void_p, _INT, _INT]
+    _MKL.pardiso.restype = None
+    _MKL.pardiso.argtypes = [ctypes.c_void_p, *[_INT] * 5, ctypes.c_void_p, _INT, _INT, _INT, _INT,
+                             _INT, _INT, ctypes.c_void_p, ctypes.c_void_p, _INT]  # fmt: skip
+
+_ERRORS = {
+    -1: "input inconsistent",
+    -2: "not enough memory",
+    -3: "reordering problem",
+    -4: "zero pivot, numerical factorisation or iterative refinement problem",
+    -10: "no license file found",
+    -12: "wrong input (order or type of the matrix)",
+}
+
+
+class PardisoError(RuntimeError):
+    """PARDISO returned an error code."""
+
+
+def _int(value: int) -> ctypes.c_int32:
+    return ctypes.c_int32(value)
+
+
+class Pardiso:
+    """L D Lᵀ factorisation of a symmetric sparse matrix given by its upper triangle.
+
+    The ordering and symbolic analysis (METIS nested dissection) happen once, in the
+    constructor; :meth:`factorise` computes the numeric factorisation for new values on the
+    same graph and :meth:`solve` back-substitutes. One thread: MKL's pool is limited by
+    :class:`ngat.threads.FixedThreads`, and with one thread the results repeat to the last bit.
+
+    Parameters
+    ----------
+    indptr, indices
+        CSR graph of the upper triangle (diagonal included, columns sorted in each row).
+    definite
+        Whether the matrix is positive definite (Cholesky) or only symmetric (Bunch–Kaufman
+        pivoting, and :attr:`negative_eigenvalues` is counted).
+    """
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, definite: bool) -> None:
+        if not AVAILABLE:
+            raise PardisoError("MKL PARDISO is not available: pip install mkl (x86-64 only)")
+        self.n = len(indptr) - 1
+        self._indptr = np.ascontiguousarray(indptr, dtype=np.int32)
+        self._indices = np.ascontiguousarray(indices, dtype=np.int32)
+        self._values = np.zeros(len(indices))
+        self._rhs, self._out = np.zeros(self.n), np.zeros(self.n)
+        self._mtype = 2 if definite else -2
+        self._handle = np.zeros(64, dtype=np.int64)
+        self.iparm = np.zeros(64, dtype=np.int32)
+        _MKL.pardisoinit(
+            self._handle.ctypes.data, ctypes.byref(_int(self._mtype)), _ptr(self.iparm)
+        )
+        self.iparm[1] = 2  # METIS nested dissection (sequential)
+        self.iparm[7] = 0  # iterative refinement only after perturbed pivots
+        self.iparm[34] = 1  # zero-based indices
+        if self.n:
+            self._call(11)
+            # Released when the object goes, or at exit before the modules are torn down.
+            weakref.finalize(self, _pardiso, self._handle, self._mtype, -1, self.iparm)
+
+    def _call(self, phase: int) -> None:
+        arrays = (self._values, self._indptr, self._indices, self._rhs, self._out)
+        _pardiso(self._handle, self._mtype, phase, self.iparm, arrays)
+
+    def factorise(self, values: np.ndarray) -> None:
+        """Compute the numeric factorisation for the upper triangle's ``values``."""
+        self._values[:] = values
+        if self.n:
+            self._call(22)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Return A⁻¹ ``rhs`` with the last factorisation."""
+        self._rhs[:] = rhs
+        if self.n:
+            self._call(33)
+        return self._out.copy()
+
+    @property
+    def negative_eigenvalues(self) -> int:
+        """Negative eigenvalues of the last factorised matrix (symmetric indefinite only)."""
+        return int(self.iparm[22])
+
+
+def _ptr(array: np.ndarray):
+    """Return a pointer to an int32 array's data."""
+    return array.ctypes.data_as(_INT)
+
+
+def _pardiso(handle: np.ndarray, mtype: int, phase: int, iparm: np.ndarray, arrays=()) -> None:
+    """Call PARDISO's ``phase`` (maxfct = mnum = 1, one right-hand side).
+
+    ``arrays`` are the values, row pointers, columns, right-hand side and solution; none for the
+    release (phase −1).
+    """
+    values, indptr, indices, rhs, out = arrays or (None,) * 5
+    error = _int(0)
+    _MKL.pardiso(
+        handle.ctypes.data, ctypes.byref(_int(1)), ctypes.byref(_int(1)),
+        ctypes.byref(_int(mtype)), ctypes.byref(_int(phase)),
+        ctypes.byref(_int(0 if rhs is None else len(rhs))),
+        None if values is None else values.ctypes.data,
+        None if indptr is None else _ptr(indptr), None if indices is None else _ptr(indices),
+        None, ctypes.byref(_int(1)), _ptr(iparm), ctypes.byref(_int(0)),
+        None if rhs is None else rhs.ctypes.data, None if out is None else out.ctypes.data,
+        ctypes.byref(error),
+    )  # fmt: skip
+    if error.value:
+        reason = _ERRORS.get(error.value, "see MKL's PARDISO documentation")
+        raise PardisoError(f"PARDISO phase {phase} failed with error {error.value}: {reason}")
+
+
+class PardisoInverse(BaseMatrix):
+    """A⁻¹ of an NGSolve sparse matrix on its free DOFs by :class:`Pardiso`, 0 on the others.
+
+    Used like ``matrix.Inverse(free)``: ``inverse * x`` solves and :meth:`Update` refactorises
+    with the matrix's current values (same graph). The matrix may store its whole graph or only
+    the entries on and below the diagonal; those are the ones read.
+
+    Parameters
+    ----------
+    matrix
+        The sparse matrix; its values may change between :meth:`Update` calls.
+    free
+        Boolean mask of the free DOFs.
+    definite
+        Whether the matrix is positive definite on the free DOFs (see :class:`Pardiso`).
+    """
+
+    def __init__(self, matrix: SparseMatrixd, free: np.ndarray, definite: bool = True) -> None:
+        super().__init__()
+        self.matrix = matrix
+        self.free = np.flatnonzero(free)
+        _, cols, rowptr = matrix.CSR()
+        cols, rowptr = np.asarray(cols, dtype=np.int64), np.asarray(rowptr, dtype=np.int64)
+        rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
+        number = np.full(len(rowptr) - 1, -1)
+        number[self.free] = np.arange(len(self.free))
+        lower = np.flatnonzero((cols <= rows) & (number[rows] >= 0) & (number[cols] >= 0))
+        # The lower triangle's entry (a, b) is the upper triangle's (b, a): a stable sort by
+        # column keeps the rows (ascending in CSR order) sorted within each new row.
+        self._take = lower[np.argsort(cols[lower], kind="stable")]
+        upper_rows = number[cols[self._take]]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(upper_rows, minlength=len(self.free)))])
+        self.factor = Pardiso(indptr, number[rows[self._take]], definite)
+        self.Update()
+
+    def Update(self) -> None:
+        """Refactorise with the matrix's current values.
+
+        Values that are not finite are not factorised: the solves then give NaN, as NGSolve's
+        sparse Cholesky does, and the iteration that produced them stops with its message.
+        """
+        values = self.matrix.AsVector().FV().NumPy()[self._take]
+        self.finite = bool(np.isfinite(values).all())
+        if self.finite:
+            self.factor.factorise(values)
+
+    def Mult(self, x: BaseVector, y: BaseVector) -> None:
+        """Set y = A⁻¹ x on the free DOFs and 0 on the others."""
+        out = y.FV().NumPy()
+        out[:] = 0.0
+        out[self.free] = self.factor.solve(x.FV().NumPy()[self.free]) if self.finite else np.nan
+
+    def Height(self) -> int:
+        """Return the matrix's height."""
+        return self.matrix.height
+
+    def Width(self) -> int:
+        """Return the matrix's width."""
+        return self.matrix.width
+
+    def CreateColVector(self) -> BaseVector:
+        """Return a vector like the matrix's columns."""
+        return self.matrix.CreateColVector()
+
+    def CreateRowVector(self) -> BaseVector:
+        """Return a vector like the matrix's rows."""
+        return self.matrix.CreateRowVector()
+
+    @property
+    def negative_eigenvalues(self) -> int:
+        """Negative eigenvalues of the last factorised matrix on the free DOFs."""
+        return self.factor.negative_eigenvalues
+
+
+def sparse_inverse(matrix: SparseMatrixd, free: np.ndarray | None = None, definite: bool = True):
+    """Return A⁻¹ on the free DOFs: :class:`PardisoInverse` with MKL, else NGSolve's Cholesky.
+
+    Both refactorise with ``Update()`` on the same graph and solve with ``inverse * x``.
+    NGSolve's sparse Cholesky reads the entries on and below the diagonal as well and factorises
+    indefinite matrices (L D Lᵀ) too, but counts no negative eigenvalues.
+    """
+    if free is None:
+        free = np.ones(matrix.height, dtype=bool)
+    if AVAILABLE:
+        return PardisoInverse(matrix, free, definite)
+    return matrix.Inverse(BitArray(free), inverse="sparsecholesky")

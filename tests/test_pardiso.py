@@ -1,0 +1,113 @@
+"""MKL PARDISO factorisations (ngat.pardiso): solutions, inertia, refactorisation, fallback.
+
+Checked against scipy's sparse LU and numpy's dense eigenvalues on P1 matrices of a small
+mesh; skipped where MKL is not installed (there ngat uses NGSolve's sparse Cholesky, checked
+by the fallback test).
+"""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from netgen.geom2d import unit_square
+from ngsolve import H1, BilinearForm, Mesh, dx, grad
+
+import ngat.pardiso
+from ngat.forms import sparse_from_coo
+from ngat.pardiso import PardisoInverse, sparse_inverse
+
+needs_mkl = pytest.mark.skipif(not ngat.pardiso.AVAILABLE, reason="MKL is not installed")
+
+
+@pytest.fixture(scope="module")
+def p1():
+    """Stiffness and mass matrices of P1 on a unit square (about 250 DOFs), left side fixed."""
+    mesh = Mesh(unit_square.GenerateMesh(maxh=0.08))
+    space = H1(mesh, order=1, dirichlet="left")
+    u, w = space.TnT()
+    stiffness = BilinearForm(grad(u) * grad(w) * dx).Assemble().mat
+    mass = BilinearForm(u * w * dx).Assemble().mat
+    free = np.array(space.FreeDofs(), dtype=bool)
+    return as_scipy(stiffness), as_scipy(mass), free
+
+
+def as_scipy(matrix):
+    values, cols, rowptr = map(np.array, matrix.CSR())
+    return sp.csr_matrix((values, cols, rowptr), shape=matrix.shape)
+
+
+def as_ngsolve(matrix):
+    coo = matrix.tocoo()
+    return sparse_from_coo(coo.row, coo.col, coo.data, *matrix.shape)
+
+
+def solve(inverse, matrix, rhs):
+    x = matrix.CreateColVector()
+    x.FV().NumPy()[:] = rhs
+    return (inverse * x).Evaluate().FV().NumPy().copy()
+
+
+@needs_mkl
+def test_the_solution_is_that_of_the_free_block_and_zero_on_the_fixed_dofs(p1):
+    stiffness, mass, free = p1
+    matrix = stiffness + mass
+    rhs = np.random.default_rng(0).random(matrix.shape[0])
+    x = solve(PardisoInverse(as_ngsolve(matrix), free), as_ngsolve(matrix), rhs)
+    expected = spla.spsolve(matrix[free][:, free].tocsc(), rhs[free])
+    assert np.allclose(x[free], expected, rtol=1e-11, atol=1e-13 * np.abs(expected).max())
+    assert not np.any(x[~free])
+
+
+@needs_mkl
+def test_a_matrix_stored_by_its_lower_triangle_is_factorised_to_the_same_bits(p1):
+    stiffness, mass, free = p1
+    matrix = stiffness + mass
+    rhs = np.random.default_rng(1).random(matrix.shape[0])
+    whole = as_ngsolve(matrix)
+    lower = as_ngsolve(sp.tril(matrix, format="csr"))
+    assert lower.nze < 0.6 * whole.nze
+    x_whole = solve(PardisoInverse(whole, free), whole, rhs)
+    assert np.array_equal(solve(PardisoInverse(lower, free), lower, rhs), x_whole)
+
+
+@needs_mkl
+@pytest.mark.parametrize("shift", [0.0, 30.0, 300.0])
+def test_the_factorisation_counts_the_negative_eigenvalues(p1, shift):
+    stiffness, mass, free = p1
+    matrix = stiffness - shift * mass
+    eigenvalues = np.linalg.eigvalsh(matrix[free][:, free].toarray())
+    assert np.min(np.abs(eigenvalues)) > 1e-6 * np.max(np.abs(eigenvalues))  # not singular
+    inverse = PardisoInverse(as_ngsolve(matrix), free, definite=False)
+    assert inverse.negative_eigenvalues == np.sum(eigenvalues < 0)
+    if shift:
+        assert inverse.negative_eigenvalues > 0
+
+
+@needs_mkl
+def test_update_refactorises_with_the_values_written_in_place(p1):
+    stiffness, mass, free = p1
+    matrix = as_ngsolve(stiffness + mass)
+    inverse = PardisoInverse(matrix, free)
+    rhs = np.random.default_rng(2).random(matrix.height)
+    first = solve(inverse, matrix, rhs)
+    matrix.AsVector().FV().NumPy()[:] = (stiffness + 5.0 * mass).data
+    inverse.Update()
+    again = solve(inverse, matrix, rhs)
+    expected = spla.spsolve((stiffness + 5.0 * mass)[free][:, free].tocsc(), rhs[free])
+    assert np.allclose(again[free], expected, rtol=1e-11, atol=1e-13 * np.abs(expected).max())
+    assert not np.allclose(again, first)
+    inverse.Update()
+    assert np.array_equal(solve(inverse, matrix, rhs), again)  # the same values, the same bits
+
+
+def test_without_mkl_the_inverse_is_ngsolves_sparse_cholesky(p1, monkeypatch):
+    stiffness, mass, free = p1
+    matrix = as_ngsolve(stiffness + mass)
+    monkeypatch.setattr(ngat.pardiso, "AVAILABLE", False)
+    inverse = sparse_inverse(matrix, free)
+    assert not isinstance(inverse, PardisoInverse)
+    assert not hasattr(inverse, "negative_eigenvalues")
+    rhs = np.random.default_rng(3).random(matrix.height)
+    expected = spla.spsolve((stiffness + mass)[free][:, free].tocsc(), rhs[free])
+    x = solve(inverse, matrix, rhs)
+    assert np.allclose(x[free], expected, rtol=1e-11, atol=1e-13 * np.abs(expected).max())
