@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ngat import __version__
+from ngat import __version__, pardiso
 from ngat.band import CrackBand
 from ngat.checkpoint import (
     prepare_resume,
@@ -65,10 +65,15 @@ StepCallback = Callable[[dict[str, Any]], None]
 
 
 def versions() -> dict[str, str]:
-    """Return the versions of Python and the packages a run depends on."""
+    """Return the versions of Python and the packages a run depends on.
+
+    ``mkl`` is MKL PARDISO's version, or ``"none"`` where ngat factorises with NGSolve's sparse
+    Cholesky (:mod:`ngat.pardiso`).
+    """
     result = {"python": platform.python_version(), "ngat": __version__}
     for package in ("ngsolve", "numpy", "scipy"):
         result[package] = version(package)
+    result["mkl"] = version("mkl") if pardiso.AVAILABLE else "none"
     return result
 
 

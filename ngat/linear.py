@@ -1,4 +1,7 @@
-"""Linear solvers of one matrix: sparse Cholesky, or CG with NGSolve's h1amg preconditioner.
+"""Linear solvers of one matrix: a sparse direct factorisation, or CG with NGSolve's h1amg.
+
+The factorisation is :func:`ngat.pardiso.sparse_inverse`'s: MKL PARDISO, or NGSolve's sparse
+Cholesky where MKL is not installed.
 
 Between two alternating-minimisation iterations the matrices of a_j and b_j change only where v
 or ∇u changed, and less and less as the iteration converges. :class:`LaggedCholesky` therefore
@@ -30,6 +33,8 @@ from ngsolve import BilinearForm, BitArray, IntRange, Preconditioner
 from ngsolve.krylovspace import CGSolver
 from ngsolve.la import BaseMatrix, BaseVector, Embedding, SparseMatrixd
 
+from ngat.pardiso import sparse_inverse
+
 __all__ = ["LaggedCholesky", "HeldCholesky", "AMGConjugateGradient"]
 
 log = logging.getLogger(__name__)
@@ -53,7 +58,7 @@ class LaggedCholesky:
     def __init__(self, matrix: SparseMatrixd, free: np.ndarray, max_cg: int, tol: float = 1e-10):
         self.matrix = matrix
         self.free = free.copy()
-        self.inverse = matrix.Inverse(BitArray(free), inverse="sparsecholesky")
+        self.inverse = sparse_inverse(matrix, free)
         # The values behind the factorisation: a checkpoint keeps them (ngat.checkpoint).
         self.factored_values = matrix.AsVector().FV().NumPy().copy()
         self.max_cg = max_cg

@@ -17,7 +17,9 @@ Newton is attracted by saddles of I_j as much as by minimisers, and the quasi-st
 passes near saddles exactly where the crack is about to move. Before a Newton step,
 :meth:`NewtonSolver.negative_curvature` therefore looks for negative curvature with a few
 Lanczos steps on H⁻¹ and, if it finds some, the step follows it instead (as alternating
-minimisation, a descent method, eventually does).
+minimisation, a descent method, eventually does). MKL PARDISO's factorisation of H counts its
+negative eigenvalues (:mod:`ngat.pardiso`); where it counts none, no search can find any and
+none is made.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from scipy.linalg import eigh_tridiagonal
 from ngat.forms import sparse_from_coo
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError
+from ngat.pardiso import sparse_inverse
 from ngat.state import ATState
 
 __all__ = ["NewtonSolver"]
@@ -208,7 +211,7 @@ class NewtonSolver:
             self.matrix.AsVector().FV().NumPy()[:] = values
         with state.timer("solve"):
             if self.inverse is None:
-                self.inverse = self.matrix.Inverse(inverse="sparsecholesky")
+                self.inverse = sparse_inverse(self.matrix, definite=False)
             else:
                 self.inverse.Update()
         return u, v, upper, gradient, held
@@ -246,7 +249,7 @@ class NewtonSolver:
             self.solves += 1
             size = np.max(np.abs(delta[len(u) :]))
             found = None
-            if size >= self.certified:
+            if size >= self.certified and self._indefinite():
                 found = self.negative_curvature(residual, delta)
         self.certified = 0.0
         if found is not None:
@@ -276,6 +279,14 @@ class NewtonSolver:
         """Forget the last check for negative curvature and count from zero (a new load step)."""
         self.certified = 0.0
         self.solves = self.curvature_solves = 0
+
+    def _indefinite(self) -> bool:
+        """Whether the factorised Hessian may have a negative eigenvalue.
+
+        PARDISO's L D Lᵀ factorisation counts them (Sylvester's law of inertia): with none, no
+        search can find negative curvature. NGSolve's sparse Cholesky does not count them.
+        """
+        return getattr(self.inverse, "negative_eigenvalues", 1) > 0
 
     def _apply_inverse(self, x: np.ndarray) -> np.ndarray:
         """Return H⁻¹ x with the current factorisation."""
