@@ -251,7 +251,7 @@ class HalfStepSolvers:
         v-step's factorisation, more get a factorisation of their own (of the 69 bounded
         v-steps of the default ``two-slits`` run, 65 start with 3–6 active DOFs, 3 with 13–15).
         """
-        state = self.state
+        state, operators = self.state, self._operators
         v = state.v_values
         round_off = 1e-12
         low = free & (v < -round_off)
@@ -268,9 +268,11 @@ class HalfStepSolvers:
             elif (free & ~inactive).sum() <= HeldCholesky.MAX_HELD:
                 self._v_correction(HeldCholesky(self._b_solver, inactive, decoupled=~free))
             else:
-                self._v_correction(LaggedCholesky(self._operators.b_matrix, inactive, 0))
+                self._v_correction(
+                    LaggedCholesky(operators.b_matrix, inactive, 0, ordering=operators.ordering)
+                )
             self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
-            self._v_residual.data -= self._operators.b_matrix * state.v.vec
+            self._v_residual.data -= operators.b_matrix * state.v.vec
             gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
             new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
             new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))
@@ -298,7 +300,7 @@ class HalfStepSolvers:
             solver.values_changed(free)
             return solver
         if solver is None or not np.array_equal(free, solver.free):
-            return LaggedCholesky(matrix, free, self.max_cg)
+            return LaggedCholesky(matrix, free, self.max_cg, ordering=operators.ordering)
         solver.values_changed()
         return solver
 
@@ -358,7 +360,11 @@ class HalfStepSolvers:
         state, operators = self.state, self.operators
         if "a_factored" in saved:
             operators.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
-            self._a_solver = LaggedCholesky(operators.a_matrix, ~state.dirichlet, self.max_cg)
+            self._a_solver = LaggedCholesky(
+                operators.a_matrix, ~state.dirichlet, self.max_cg, ordering=operators.ordering
+            )
         if "b_factored" in saved:
             operators.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
-            self._b_solver = LaggedCholesky(operators.b_matrix, saved["b_free"], self.max_cg)
+            self._b_solver = LaggedCholesky(
+                operators.b_matrix, saved["b_free"], self.max_cg, ordering=operators.ordering
+            )

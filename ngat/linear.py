@@ -53,12 +53,21 @@ class LaggedCholesky:
         Largest number of CG iterations accepted with a stale factorisation.
     tol
         Relative residual reduction required from CG.
+    ordering
+        Fill-reducing ordering of the mesh's vertices (:func:`ngat.pardiso.sparse_inverse`).
     """
 
-    def __init__(self, matrix: SparseMatrixd, free: np.ndarray, max_cg: int, tol: float = 1e-10):
+    def __init__(
+        self,
+        matrix: SparseMatrixd,
+        free: np.ndarray,
+        max_cg: int,
+        tol: float = 1e-10,
+        ordering: np.ndarray | None = None,
+    ):
         self.matrix = matrix
         self.free = free.copy()
-        self.inverse = sparse_inverse(matrix, free)
+        self.inverse = sparse_inverse(matrix, free, ordering=ordering)
         # The values behind the factorisation: a checkpoint keeps them (ngat.checkpoint).
         self.factored_values = matrix.AsVector().FV().NumPy().copy()
         self.max_cg = max_cg

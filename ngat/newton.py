@@ -211,7 +211,8 @@ class NewtonSolver:
             self.matrix.AsVector().FV().NumPy()[:] = values
         with state.timer("solve"):
             if self.inverse is None:
-                self.inverse = sparse_inverse(self.matrix, definite=False)
+                ordering = self.half_steps.operators.ordering
+                self.inverse = sparse_inverse(self.matrix, definite=False, ordering=ordering)
             else:
                 self.inverse.Update()
         return u, v, upper, gradient, held

@@ -20,6 +20,7 @@ import functools
 
 import numpy as np
 
+from ngat import pardiso
 from ngat.forms import LumpedAssembler, graph_matrix
 from ngat.state import ATState
 
@@ -46,6 +47,10 @@ class LumpedOperators:
         The element matrices of a_j's parts (one without an energy split).
     arrays
         The mesh arrays the operators were built on.
+    ordering
+        A fill-reducing ordering of the mesh's vertices shared by every sparse factorisation
+        on it (a_j, b_j, Newton's Hessian; :func:`ngat.pardiso.vertex_ordering`), computed at
+        the first use; ``None`` where NGSolve's sparse Cholesky computes its own.
     """
 
     def __init__(self, state: ATState):
@@ -67,6 +72,11 @@ class LumpedOperators:
             else:
                 self.b_matrix = graph_matrix(arrays)
                 self.b_assembler = LumpedAssembler(arrays, self.b_matrix, model.lumping)
+
+    @functools.cached_property
+    def ordering(self) -> np.ndarray | None:
+        """The vertices' fill-reducing ordering (see the class's attributes)."""
+        return pardiso.vertex_ordering(self.b_matrix) if pardiso.AVAILABLE else None
 
     def u_matrix_values(self) -> np.ndarray:
         """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).

@@ -14,7 +14,7 @@ from ngsolve import H1, BilinearForm, Mesh, dx, grad
 
 import ngat.pardiso
 from ngat.forms import sparse_from_coo
-from ngat.pardiso import PardisoInverse, sparse_inverse
+from ngat.pardiso import PardisoInverse, sparse_inverse, vertex_ordering
 
 needs_mkl = pytest.mark.skipif(not ngat.pardiso.AVAILABLE, reason="MKL is not installed")
 
@@ -98,6 +98,25 @@ def test_update_refactorises_with_the_values_written_in_place(p1):
     assert not np.allclose(again, first)
     inverse.Update()
     assert np.array_equal(solve(inverse, matrix, rhs), again)  # the same values, the same bits
+
+
+@needs_mkl
+def test_one_vertex_ordering_serves_the_free_dofs_and_every_component(p1):
+    stiffness, mass, free = p1
+    n = stiffness.shape[0]
+    ordering = vertex_ordering(as_ngsolve(stiffness + mass))
+    assert np.array_equal(np.sort(ordering), np.arange(n))
+    # Two components per vertex (component-major), coupled, the first fixed on the left side.
+    block = sp.bmat([[stiffness + mass, 0.1 * mass], [0.1 * mass, stiffness + mass]], "csr")
+    free2 = np.concatenate([free, np.ones(n, dtype=bool)])
+    inverse = PardisoInverse(as_ngsolve(block), free2, ordering=ordering)
+    pivots = inverse.free[inverse.factor.ordering]
+    expected = [c * n + i for i in ordering for c in (0, 1) if free2[c * n + i]]
+    assert np.array_equal(pivots, expected), "vertex by vertex, in the given order"
+    rhs = np.random.default_rng(4).random(2 * n)
+    x = solve(inverse, as_ngsolve(block), rhs)
+    reference = spla.spsolve(block[free2][:, free2].tocsc(), rhs[free2])
+    assert np.allclose(x[free2], reference, rtol=1e-11, atol=1e-13 * np.abs(reference).max())
 
 
 def test_without_mkl_the_inverse_is_ngsolves_sparse_cholesky(p1, monkeypatch):
