@@ -1,4 +1,4 @@
-"""MKL PARDISO factorisations (ngat.pardiso): solutions, inertia, refactorisation, fallback.
+"""MKL PARDISO factorisations (ngat.pardiso): solutions, inertia, orderings, fallback.
 
 Checked against scipy's sparse LU and numpy's dense eigenvalues on P1 matrices of a small
 mesh; skipped where MKL is not installed (there ngat uses NGSolve's sparse Cholesky, checked
@@ -13,8 +13,10 @@ from netgen.geom2d import unit_square
 from ngsolve import H1, BilinearForm, Mesh, dx, grad
 
 import ngat.pardiso
+from ngat.driver import run
 from ngat.forms import sparse_from_coo
 from ngat.pardiso import PardisoInverse, sparse_inverse, vertex_ordering
+from ngat.scene import load_scene
 
 needs_mkl = pytest.mark.skipif(not ngat.pardiso.AVAILABLE, reason="MKL is not installed")
 
@@ -130,3 +132,20 @@ def test_without_mkl_the_inverse_is_ngsolves_sparse_cholesky(p1, monkeypatch):
     expected = spla.spsolve((stiffness + mass)[free][:, free].tocsc(), rhs[free])
     x = solve(inverse, matrix, rhs)
     assert np.allclose(x[free], expected, rtol=1e-11, atol=1e-13 * np.abs(expected).max())
+
+
+@needs_mkl
+def test_a_run_without_mkl_reaches_the_same_states_to_round_off(tmp_path, monkeypatch):
+    scene = load_scene("two-slits")
+    overrides = {"adapt": "fixed", "maxh": 0.5, "eps": 0.5, "resolve_eps": False}
+    parameters, _ = scene.configure(overrides=overrides)
+    times = np.array([0.0, 0.5, 1.0])
+    with_mkl = run(scene, parameters, times, tmp_path / "mkl")
+    monkeypatch.setattr(ngat.pardiso, "AVAILABLE", False)
+    without = run(scene, parameters, times, tmp_path / "cholesky")
+    assert with_mkl.summary["versions"]["mkl"] != "none"
+    assert without.summary["versions"]["mkl"] == "none"
+    for a, b in zip(with_mkl.records, without.records, strict=True):
+        assert a["am_iterations"] == b["am_iterations"]
+        assert b["total"] == pytest.approx(a["total"], rel=1e-9)
+        assert b["force"] == pytest.approx(a["force"], rel=1e-7, abs=1e-12)
