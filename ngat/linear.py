@@ -104,12 +104,11 @@ class LaggedCholesky:
 class HeldCholesky:
     """Solve A x = b with a few of a :class:`LaggedCholesky`'s free DOFs held at 0.
 
-    A new free set needs a new sparse Cholesky factorisation, ordering and symbolic analysis
-    included (several times a numeric refactorisation). Where only a few DOFs S of the
-    factorised set F are held (the bounded v-step's active set, usually a handful of vertices
-    next to the crack), the capacitance matrix gives the solution on I = F − S exactly from the
-    factorisation at hand: with y = A_FF⁻¹ b̃ (b on I, 0 on S) and the columns W = A_FF⁻¹ E_S of
-    the held DOFs,
+    A new free set needs a new factorisation, symbolic analysis included (several times a numeric
+    refactorisation). Where only a few DOFs S of the factorised set F are held (the bounded v-step's
+    active set, usually a handful of vertices next to the crack), the capacitance matrix gives the
+    solution on I = F − S exactly from the factorisation at hand: with y = A_FF⁻¹ b̃ (b on I, 0 on
+    S) and the columns W = A_FF⁻¹ E_S of the held DOFs,
 
         x = y − W (W_SS)⁻¹ y_S
 

@@ -106,17 +106,18 @@ class NewtonSolver:
         """Build the lower triangle's graph, the scatter positions and the work vectors.
 
         The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model: c
-        components, component-major) and of v (behind u's): every one of its (c + 1)² blocks
-        has the graph G of the P1 space, whose positions of the element couplings the
-        assembler of b_j already holds (:class:`ngat.operators.LumpedOperators`). NGSolve's
-        sparse Cholesky factorisation reads the entries on and below the diagonal only, so the
-        matrix stores just those: of block row I, the blocks J < I whole and the lower part L
-        of G in block I (the same factorisation to the last bit, half the entries to assemble
-        and copy; ``tests/test_solvers.py``). Its rows are sorted, and in a sorted row a of G
-        the columns b ≤ a come first, so row (I, a) starts at Σ_{I' < I} (I' nnz(G) + nnz(L))
-        + I rowptr_G[a] + rowptr_L[a] and holds column (J, b) at J deg(a) + the position of b
-        in row a of G: each local entry's position follows by that arithmetic, without a
-        search. The local entries above the diagonal go to a discarded slot behind the matrix.
+        components, component-major) and of v (behind u's): every one of its (c + 1)² blocks has
+        the graph G of the P1 space, whose positions of the element couplings the assembler of
+        b_j already holds (:class:`ngat.operators.LumpedOperators`). Both factorisations
+        (:func:`ngat.pardiso.sparse_inverse`) read the entries on and below the diagonal only,
+        so the matrix stores just those: of block row I, the blocks J < I whole and the lower
+        part L of G in block I (half the entries to assemble and copy; the same factorisation to
+        the last bit with NGSolve's, ``tests/test_solvers.py``). Its rows are sorted, and in a
+        sorted row a of G the columns b ≤ a come first, so row (I, a) starts at Σ_{I' < I} (I'
+        nnz(G) + nnz(L)) + I rowptr_G[a] + rowptr_L[a] and holds column (J, b) at J deg(a) + the
+        position of b in row a of G: each local entry's position follows by that arithmetic,
+        without a search. The local entries above the diagonal go to a discarded slot behind the
+        matrix.
         """
         state = self.state
         arrays = state.arrays
