@@ -51,12 +51,13 @@ def _load_mkl() -> ctypes.CDLL | None:
 
 
 # Loaded at import, with the OpenMP library MKL's threading layer loads on first use, so that
-# the thread limits of ngat.threads reach both.
+# the thread limits of ngat.threads reach both; MKL uses the threads it is given, no fewer.
 _MKL = _load_mkl()
 AVAILABLE = _MKL is not None
 """Whether MKL PARDISO can be used."""
 if _MKL is not None:
     _MKL.MKL_Get_Max_Threads()
+    _MKL.MKL_Set_Dynamic(0)
 
 _INT = ctypes.POINTER(ctypes.c_int32)
 if _MKL is not None:
@@ -89,8 +90,9 @@ class Pardiso:
 
     The ordering and symbolic analysis (METIS nested dissection) happen once, in the
     constructor; :meth:`factorise` computes the numeric factorisation for new values on the
-    same graph and :meth:`solve` back-substitutes. One thread: MKL's pool is limited by
-    :class:`ngat.threads.FixedThreads`, and with one thread the results repeat to the last bit.
+    same graph and :meth:`solve` back-substitutes. MKL's threads are set by
+    :class:`ngat.threads.FixedThreads`; the results are the same to the last bit with one
+    thread or two.
 
     Parameters
     ----------

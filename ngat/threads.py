@@ -10,22 +10,46 @@ so the same run gave different element counts from load step 25 on under ``ngat 
 duration of a run (threadpoolctl for the BLAS and OpenMP libraries loaded in the process), and
 reports them for ``summary.json``. One thread each is also the fastest on two cores
 (``README.md``).
+
+MKL PARDISO's factorisations are the exception: they gave the same bits with one thread and
+with two in every comparison made (``tests/test_pardiso.py``, and the quick two-slits run's
+``energies.csv``), and two threads factorise about 1.5 times faster
+on the example's meshes. MKL therefore gets :func:`factorisation_threads`, the cores the process
+may use unless ``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1).
 """
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import ngsolve
 from threadpoolctl import threadpool_info, threadpool_limits
 
-__all__ = ["FixedThreads", "NGSOLVE_THREADS", "BLAS_THREADS"]
+__all__ = ["FixedThreads", "NGSOLVE_THREADS", "BLAS_THREADS", "factorisation_threads"]
 
 NGSOLVE_THREADS = 1
 """NGSolve's threads: with more, the sparse Cholesky factorisation sums in an order that
 varies from run to run."""
 BLAS_THREADS = 1
-"""Threads of every BLAS and OpenMP library loaded (OpenBLAS of NGSolve, numpy and scipy)."""
+"""Threads of every BLAS and OpenMP library loaded (OpenBLAS of NGSolve, numpy and scipy) but
+MKL."""
+
+
+def factorisation_threads() -> int:
+    """Return the threads of MKL PARDISO: ``MKL_NUM_THREADS``, or the cores this process may use.
+
+    Raises
+    ------
+    ValueError
+        If ``MKL_NUM_THREADS`` is set to something other than a positive integer.
+    """
+    setting = os.environ.get("MKL_NUM_THREADS")
+    if setting is None:
+        return len(os.sched_getaffinity(0))
+    if not setting.strip().isdigit() or int(setting) < 1:
+        raise ValueError(f"MKL_NUM_THREADS={setting!r}: expected a positive integer")
+    return int(setting)
 
 
 class FixedThreads:
@@ -40,15 +64,21 @@ class FixedThreads:
     """
 
     def __init__(self) -> None:
+        self.factorisation = factorisation_threads()
         self._ngsolve = ngsolve.GetNumThreads()
         ngsolve.SetNumThreads(NGSOLVE_THREADS)
-        self._limits = threadpool_limits(limits=BLAS_THREADS)
+        limits = {
+            pool["prefix"]: self.factorisation if pool["internal_api"] == "mkl" else BLAS_THREADS
+            for pool in threadpool_info()
+        }
+        self._limits = threadpool_limits(limits=limits)
 
     def summary(self) -> dict[str, Any]:
         """Return the thread counts in force, per pool and per library loaded."""
         return {
             "ngsolve": ngsolve.GetNumThreads(),
             "blas": BLAS_THREADS,
+            "factorisation": self.factorisation,
             "libraries": [
                 {
                     "library": pool["prefix"],

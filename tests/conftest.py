@@ -1,9 +1,17 @@
 """Shared fixtures: the quick two-slits run, computed once per test session."""
 
+import os
+
 import pytest
 
 from ngat.driver import run
 from ngat.scene import load_scene
+
+# The test processes run side by side, one per core (pytest-xdist): one factorisation thread
+# each, as in a sweep. Two each would oversubscribe the cores: two quick runs at once took 58 s
+# each with two MKL threads against 24 s with one.
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 
 class HalfStepLog:

@@ -10,7 +10,9 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from netgen.geom2d import unit_square
-from ngsolve import H1, BilinearForm, Mesh, dx, grad
+from ngsolve import H1, BilinearForm, Mesh, dx, grad, x, y
+from ngsolve.meshes import MakeStructured2DMesh
+from threadpoolctl import threadpool_limits
 
 import ngat.pardiso
 from ngat.driver import run
@@ -149,3 +151,30 @@ def test_a_run_without_mkl_reaches_the_same_states_to_round_off(tmp_path, monkey
         assert a["am_iterations"] == b["am_iterations"]
         assert b["total"] == pytest.approx(a["total"], rel=1e-9)
         assert b["force"] == pytest.approx(a["force"], rel=1e-7, abs=1e-12)
+
+
+@needs_mkl
+@pytest.mark.parametrize("definite", [True, False])
+def test_two_threads_factorise_to_the_same_bits_as_one(definite):
+    """What lets ngat give MKL the cores while fixing every other pool (ngat.threads).
+
+    On a mesh large enough for MKL to split the work (58k DOFs; two threads factorise
+    it about 1.5 times faster), indefinite as well (shifted by the mass), with the inertia.
+    """
+    space = H1(MakeStructured2DMesh(nx=240, ny=240), order=1, dirichlet="left")
+    u, w = space.TnT()
+    shift = 0.0 if definite else 2000.0
+    form = BilinearForm(((1 + x * y) * grad(u) * grad(w) - shift * u * w) * dx).Assemble()
+    free = np.array(space.FreeDofs(), dtype=bool)
+    rhs = np.sin(np.arange(space.ndof))
+    solutions, inertias = [], []
+    for threads in (1, 2, 1, 2):
+        with threadpool_limits(limits={"libmkl_rt": threads}):
+            inverse = PardisoInverse(form.mat, free, definite, vertex_ordering(form.mat))
+            solutions.append(solve(inverse, form.mat, rhs))
+            inertias.append(inverse.negative_eigenvalues)
+    assert space.ndof > 50_000
+    assert all(np.array_equal(solution, solutions[0]) for solution in solutions)
+    assert len(set(inertias)) == 1 and (inertias[0] > 0) != definite
+    residual = as_scipy(form.mat) @ solutions[0] - rhs
+    assert np.abs(residual[free]).max() < 1e-8 * np.abs(rhs).max()

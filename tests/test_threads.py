@@ -1,9 +1,10 @@
 """Results that repeat whatever the environment: ngat fixes its thread pools.
 
-``ngat run`` in an environment that asks OpenBLAS and OpenMP for two threads and the same run
-inside ``ngat sweep`` (whose Dask worker sets them to 1) write the same ``energies.csv``. Without
-the fixed pools the quick two-slits run differs from the first step on (in the last bits of the
-energies) and by 1e-3 in the final energy.
+``ngat run`` in an environment that asks OpenBLAS, OpenMP and MKL for two threads and the same
+run inside ``ngat sweep`` (whose Dask worker sets them to 1) write the same ``energies.csv``.
+Without the fixed pools the quick two-slits run differs from the first step on (in the last bits
+of the energies) and by 1e-3 in the final energy. MKL PARDISO keeps the threads it is given:
+its factorisations give the same bits with one or two (``tests/test_pardiso.py``).
 """
 
 import csv
@@ -12,6 +13,8 @@ import os
 import subprocess
 import sys
 import textwrap
+
+import pytest
 
 from ngat.threads import FixedThreads
 
@@ -45,7 +48,7 @@ def rows_without_timing(folder):
 def test_run_and_one_run_sweep_give_identical_energies(tmp_path):
     scene = tmp_path / "start.py"
     scene.write_text(textwrap.dedent(SCENE))
-    threads = {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2"}
+    threads = {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2", "MKL_NUM_THREADS": "2"}
     ngat("run", str(scene), "--quick", "--quiet", "--out", str(tmp_path / "run"), env=threads)
     sweep = ["sweep", str(scene), "--quick", "--quiet", "--grid", "eps=0.05", "--workers", "1"]
     ngat(*sweep, "--out", str(tmp_path / "sweep"))
@@ -53,17 +56,35 @@ def test_run_and_one_run_sweep_give_identical_energies(tmp_path):
     swept = rows_without_timing(tmp_path / "sweep" / "eps=0.05")
     assert len(alone) == 2
     assert alone == swept
-    for folder in (tmp_path / "run", tmp_path / "sweep" / "eps=0.05"):
+    for folder, factorisation in ((tmp_path / "run", 2), (tmp_path / "sweep" / "eps=0.05", 1)):
         recorded = json.loads((folder / "summary.json").read_text())["threads"]
         assert recorded["ngsolve"] == 1 and recorded["blas"] == 1
-        assert recorded["libraries"] and all(lib["threads"] == 1 for lib in recorded["libraries"])
+        assert recorded["factorisation"] == factorisation
+        assert_pools(recorded)
 
 
-def test_fixed_threads_are_restored():
+def assert_pools(recorded):
+    """Every pool but MKL's has one thread; MKL's has the factorisation's."""
+    assert recorded["libraries"]
+    for lib in recorded["libraries"]:
+        expected = recorded["factorisation"] if lib["api"] == "mkl" else 1
+        assert lib["threads"] == expected, lib
+
+
+def test_fixed_threads_are_restored(monkeypatch):
     from threadpoolctl import threadpool_info
 
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
     before = [pool["num_threads"] for pool in threadpool_info()]
     threads = FixedThreads()
-    assert all(lib["threads"] == 1 for lib in threads.summary()["libraries"])
+    assert threads.summary()["factorisation"] == 2
+    assert_pools(threads.summary())
     threads.restore()
     assert [pool["num_threads"] for pool in threadpool_info()] == before
+
+
+@pytest.mark.parametrize("setting", ["0", "two", "-1"])
+def test_a_bad_thread_count_is_named(monkeypatch, setting):
+    monkeypatch.setenv("MKL_NUM_THREADS", setting)
+    with pytest.raises(ValueError, match="MKL_NUM_THREADS"):
+        FixedThreads()
