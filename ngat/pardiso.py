@@ -22,6 +22,7 @@ import importlib.metadata
 import weakref
 
 import numpy as np
+import scipy.sparse as sp
 from ngsolve import BitArray
 from ngsolve.la import BaseMatrix, BaseVector, SparseMatrixd
 
@@ -288,10 +289,16 @@ def _upper_triangle(matrix: SparseMatrixd, number: np.ndarray) -> tuple[np.ndarr
     cols, rowptr = np.asarray(cols, dtype=np.int64), np.asarray(rowptr, dtype=np.int64)
     rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
     lower = np.flatnonzero((cols <= rows) & (number[rows] >= 0) & (number[cols] >= 0))
-    # A stable sort by column keeps the rows (ascending in CSR order) sorted in each new row.
-    take = lower[np.argsort(cols[lower], kind="stable")]
-    counts = np.bincount(number[cols[take]], minlength=number.max() + 1)
-    return take, np.concatenate([[0], np.cumsum(counts)]), number[rows[take]]
+    # The lower triangle in CSR (rows ascending: number is increasing on the kept rows), with
+    # each entry's position as its value; its CSC is the upper triangle's CSR, built by a
+    # counting sort that keeps the rows sorted in each column.
+    n = number.max() + 1
+    counts = np.bincount(number[rows[lower]], minlength=n)
+    lower_csr = sp.csr_matrix(
+        (lower, number[cols[lower]], np.concatenate([[0], np.cumsum(counts)])), shape=(n, n)
+    )
+    upper = lower_csr.tocsc()
+    return upper.data, upper.indptr, upper.indices
 
 
 def vertex_ordering(matrix: SparseMatrixd) -> np.ndarray:
