@@ -167,13 +167,15 @@ def test_two_threads_factorise_to_the_same_bits_as_one(definite):
     form = BilinearForm(((1 + x * y) * grad(u) * grad(w) - shift * u * w) * dx).Assemble()
     free = np.array(space.FreeDofs(), dtype=bool)
     rhs = np.sin(np.arange(space.ndof))
-    solutions, inertias = [], []
+    solutions, inertias, orderings = [], [], []
     for threads in (1, 2, 1, 2):
         with threadpool_limits(limits={"libmkl_rt": threads}):
-            inverse = PardisoInverse(form.mat, free, definite, vertex_ordering(form.mat))
+            orderings.append(vertex_ordering(form.mat))  # METIS's sequential or OpenMP version
+            inverse = PardisoInverse(form.mat, free, definite, orderings[-1])
             solutions.append(solve(inverse, form.mat, rhs))
             inertias.append(inverse.negative_eigenvalues)
     assert space.ndof > 50_000
+    assert all(np.array_equal(ordering, orderings[0]) for ordering in orderings)
     assert all(np.array_equal(solution, solutions[0]) for solution in solutions)
     assert len(set(inertias)) == 1 and (inertias[0] > 0) != definite
     residual = as_scipy(form.mat) @ solutions[0] - rhs
