@@ -54,7 +54,7 @@ from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
 from ngat.strategies import nonlinear_strategy
-from ngat.threads import FixedThreads
+from ngat.threads import FixedThreads, oversubscription
 from ngat.timing import PhaseTimer
 
 __all__ = ["run"]
@@ -219,6 +219,8 @@ def _run_locked(
     diagnostics = Diagnostics(parameters.solver.on_problem)
     diagnostics.problems.extend(summary.get("diagnostics", []))
     threads = FixedThreads()
+    if warning := oversubscription(threads.factorisation):
+        log.warning(warning)
     try:
         summary["threads"] = threads.summary()
         writer.write_summary(summary)

@@ -24,9 +24,16 @@ import os
 from typing import Any
 
 import ngsolve
+import psutil
 from threadpoolctl import threadpool_info, threadpool_limits
 
-__all__ = ["FixedThreads", "NGSOLVE_THREADS", "BLAS_THREADS", "factorisation_threads"]
+__all__ = [
+    "FixedThreads",
+    "NGSOLVE_THREADS",
+    "BLAS_THREADS",
+    "factorisation_threads",
+    "oversubscription",
+]
 
 NGSOLVE_THREADS = 1
 """NGSolve's threads: with more, the sparse Cholesky factorisation sums in an order that
@@ -50,6 +57,32 @@ def factorisation_threads() -> int:
     if not setting.strip().isdigit() or int(setting) < 1:
         raise ValueError(f"MKL_NUM_THREADS={setting!r}: expected a positive integer")
     return int(setting)
+
+
+def oversubscription(factorisation: int, interval: float = 0.1) -> str | None:
+    """Return a warning if other work keeps busy the cores the factorisation's threads need.
+
+    The processors' use is sampled over ``interval`` seconds (psutil), before the run computes
+    anything. Threads of one factorisation wait for each other at every step of it: two quick
+    runs side by side with two threads each took 58 s each, against 24 s with one.
+
+    Returns
+    -------
+    str or None
+        The warning, naming the remedy, or ``None`` if the cores are free (or one thread).
+    """
+    if factorisation < 2:
+        return None
+    cores = sorted(os.sched_getaffinity(0))
+    usage = psutil.cpu_percent(interval=interval, percpu=True)
+    busy = sum(usage[core] for core in cores if core < len(usage)) / 100
+    if busy <= len(cores) - factorisation + 0.5:
+        return None
+    return (
+        f"{busy:.1f} of {len(cores)} cores are busy with other work, and the factorisation runs "
+        f"on {factorisation} threads that wait for each other: runs side by side take several "
+        "times longer each. Set MKL_NUM_THREADS=1 for runs side by side (ngat sweep does)."
+    )
 
 
 class FixedThreads:

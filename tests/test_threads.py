@@ -88,3 +88,17 @@ def test_a_bad_thread_count_is_named(monkeypatch, setting):
     monkeypatch.setenv("MKL_NUM_THREADS", setting)
     with pytest.raises(ValueError, match="MKL_NUM_THREADS"):
         FixedThreads()
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="two threads need two cores")
+def test_a_busy_machine_is_named_when_the_factorisation_has_several_threads(monkeypatch):
+    import ngat.threads
+
+    cores = sorted(os.sched_getaffinity(0))
+    busy = {core: 100.0 for core in range(max(cores) + 1)}
+    monkeypatch.setattr(ngat.threads.psutil, "cpu_percent", lambda **kw: list(busy.values()))
+    message = ngat.threads.oversubscription(2)
+    assert message is not None and "MKL_NUM_THREADS=1" in message
+    assert ngat.threads.oversubscription(1) is None  # one thread waits for nobody
+    busy = dict.fromkeys(busy, 0.0)
+    assert ngat.threads.oversubscription(2) is None
