@@ -13,9 +13,10 @@ reports them for ``summary.json``. One thread each is also the fastest on two co
 
 MKL PARDISO's factorisations are the exception: they gave the same bits with one thread and
 with two in every comparison made (``tests/test_pardiso.py``, and the quick two-slits run's
-``energies.csv``), and two threads factorise about 1.5 times faster
-on the example's meshes. MKL therefore gets :func:`factorisation_threads`, the cores the process
-may use unless ``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1).
+``energies.csv``), and two threads factorise about 1.5 times faster on the example's meshes.
+MKL therefore gets :func:`factorisation_threads`, the cores the process may use unless
+``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :func:`oversubscription`
+warns when other work keeps those cores busy.
 """
 
 from __future__ import annotations
