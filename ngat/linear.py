@@ -68,13 +68,28 @@ class LaggedCholesky:
         self.matrix = matrix
         self.free = free.copy()
         self.inverse = sparse_inverse(matrix, free, ordering=ordering)
-        # The values behind the factorisation: a checkpoint keeps them (ngat.checkpoint).
-        self.factored_values = matrix.AsVector().FV().NumPy().copy()
         self.max_cg = max_cg
+        self._factored = self._values_to_keep()
         self.tol = tol
         self.stale = False
         self.factorizations = 1
         self.cg_iterations = 0
+
+    def _values_to_keep(self) -> np.ndarray | None:
+        """Return a copy of the values just factorised if a stale solve may use them (CG)."""
+        return self.matrix.AsVector().FV().NumPy().copy() if self.max_cg > 0 else None
+
+    @property
+    def factored_values(self) -> np.ndarray:
+        """The values behind the factorisation, which a checkpoint keeps (ngat.checkpoint).
+
+        With ``max_cg = 0`` a solve after new values always refactorises first, so the
+        factorisation's own values never act again and the matrix's current ones serve (not
+        copied at every refactorisation: a megabyte-sized copy, a thousand times a run).
+        """
+        if self._factored is not None:
+            return self._factored
+        return self.matrix.AsVector().FV().NumPy().copy()
 
     def values_changed(self) -> None:
         """Note that the caller rewrote the matrix values."""
@@ -96,7 +111,7 @@ class LaggedCholesky:
         """Refactorise with the current values if they changed since the last factorisation."""
         if self.stale:
             self.inverse.Update()
-            self.factored_values = self.matrix.AsVector().FV().NumPy().copy()
+            self._factored = self._values_to_keep()
             self.factorizations += 1
             self.stale = False
 
