@@ -46,6 +46,7 @@ __all__ = [
     "error_factor",
     "RATE_MAX",
     "NEWTON_COST",
+    "NEWTON_WAIT",
 ]
 
 NEWTON_COST = 2
@@ -54,6 +55,14 @@ coupled 2n × 2n system is about three half-step factorisations (1.5 iterations)
 ten back-solves of the search for negative curvature cost about an eighth of a factorisation
 each (0.13 s against 1.05 s at 122k vertices). Newton is tried only where more alternating
 minimisation iterations than this remain."""
+
+NEWTON_WAIT = 2
+"""Eligible iterations without a Newton attempt after an accepted step that lowered I_j by less
+than the plain iteration before it; doubled after each further such step
+(:class:`NewtonSwitch`). In the paper's example, once its cracks have linked, steps along
+negative curvature lower I_j by 0–30 % of a plain iteration's decrease and cost about two
+iterations each (27 of them, 5 s of the 38 s break step); while the cracks run, most steps
+lower it 2–10 times more than an iteration does, and the wait ends with the first such step."""
 
 
 @dataclass
@@ -289,8 +298,11 @@ class NewtonSwitch:
     coupled system (:class:`ngat.newton.NewtonSolver`), or a step along negative curvature, is
     tried from the iterate. A rejected step lowers the threshold to half the current change
     (Newton is too far from a minimiser: wait until the iteration has halved it); an accepted
-    one restarts the acceleration's history. The Newton solver is kept across load steps as
-    long as the half-steps' solvers (and so the state) are the same.
+    one restarts the acceleration's history. An accepted step pays if it lowered I_j by at
+    least as much as the plain iteration before it: after one that does not, the next
+    attempts wait 2, 4, 8, … eligible iterations (doubling with every step that does not pay,
+    none after one that pays; :data:`NEWTON_WAIT`). The Newton solver is kept across load
+    steps as long as the half-steps' solvers (and so the state) are the same.
 
     Parameters
     ----------
@@ -319,6 +331,8 @@ class NewtonSwitch:
         self.newton: NewtonSolver | None = None
         self.below, self.previous = switch, np.inf
         self.newton_steps = self.escapes = self.rejected = 0
+        self.energy, self.elements = np.inf, 0
+        self.wait = self.waiting = 0
 
     @property
     def statistics(self) -> NonlinearStatistics:
@@ -342,6 +356,8 @@ class NewtonSwitch:
         self.newton.restart()
         self.below, self.previous = self.switch, np.inf
         self.newton_steps = self.escapes = self.rejected = 0
+        self.energy, self.elements = np.inf, 0  # I_j and mesh after the last iteration
+        self.wait = self.waiting = 0
 
     def accept_u_step(self, state: ATState) -> bool:
         """Apply the iteration's safeguard."""
@@ -355,7 +371,13 @@ class NewtonSwitch:
         """Try a Newton step where the iteration is slow; return whether the state moved."""
         remaining = remaining_iterations(change, self.previous, self.am_tol, self.contraction)
         self.previous = change
+        energy, elements = state.energies()["total"], state.arrays.ne
+        descent = self.energy - energy if elements == self.elements else np.nan
+        self.energy, self.elements = energy, elements
         if not (change < self.below and remaining > NEWTON_COST):
+            return False
+        if self.waiting:
+            self.waiting -= 1
             return False
         self.previous = np.inf  # the next ratio would measure the Newton step
         outcome = self.newton.step(state.crack_set(), self.iteration.ceiling())
@@ -363,10 +385,26 @@ class NewtonSwitch:
             self.rejected += 1
             self.below = change / 2
             return False
+        self.energy = state.energies()["total"]
+        self._judge(energy - self.energy, descent)
         self.iteration.restart()
         self.newton_steps += outcome == "newton"
         self.escapes += outcome == "escape"
         return True
+
+    def _judge(self, gain: float, descent: float) -> None:
+        """Set the wait before the next attempt from what the accepted step gained.
+
+        ``gain`` is the decrease of I_j by the step, ``descent`` that by the plain iteration
+        before it (NaN if the mesh changed in between: no judgement).
+        """
+        if not np.isfinite(descent):
+            return
+        if gain < descent:
+            self.wait = max(NEWTON_WAIT, 2 * self.wait)
+            self.waiting = self.wait
+        else:
+            self.wait = 0
 
 
 RATE_MAX = 0.99
