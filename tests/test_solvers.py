@@ -21,6 +21,7 @@ from ngat.state import ATState
 from ngat.strategies import (
     RATE_MAX,
     STRATEGIES,
+    AlternatingMinimization,
     NewtonSwitch,
     estimated_error,
     nonlinear_strategy,
@@ -286,3 +287,52 @@ def test_newton_switch_keeps_the_newton_solver_of_a_state_across_load_steps():
     other = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
     strategy.start(other, HalfStepSolvers(other))
     assert strategy.newton.state is other
+
+
+class _Energy:
+    """A state reduced to what NewtonSwitch reads: I_j, the mesh's size and CR."""
+
+    def __init__(self):
+        self.total = 100.0
+        self.arrays = type("Arrays", (), {"ne": 10})()
+
+    def energies(self):
+        return {"total": self.total}
+
+    def crack_set(self):
+        return np.zeros(0, dtype=bool)
+
+
+class _Newton:
+    """A Newton solver whose every step is accepted and lowers I_j by ``gain``."""
+
+    def __init__(self, state, gains):
+        self.state, self.gains, self.attempts = state, gains, []
+
+    def step(self, crack, ceiling):
+        self.attempts.append(self.iteration)
+        self.state.total -= self.gains(len(self.attempts))
+        return "escape"
+
+
+def _attempts(gains, iterations=40):
+    """Return the iterations after which NewtonSwitch tried a step; each plain one gains 1."""
+    state = _Energy()
+    strategy = NewtonSwitch(AlternatingMinimization(), switch=0.1, am_tol=1e-3)
+    strategy.newton = newton = _Newton(state, gains)
+    for n in range(1, iterations + 1):
+        state.total -= 1.0  # the plain iteration's decrease
+        newton.iteration = n
+        strategy.after_iteration(state, 0.01 * 0.97**n)  # a creeping iteration: Newton's place
+    return newton.attempts
+
+
+def test_newton_waits_2_4_8_iterations_after_steps_that_gain_less_than_an_iteration():
+    # An attempt makes the next iteration's rate unknown (no attempt there); a step that
+    # gains less than the plain iteration before it adds a wait of 2, 4, 8, … iterations.
+    assert np.diff(_attempts(lambda k: 0.5)).tolist() == [4, 6, 10, 18]
+    # Steps that pay are tried after every other iteration.
+    assert np.diff(_attempts(lambda k: 2.0)).tolist() == [2] * 19
+    # One that pays again ends the wait: the next unpaid step waits 2 again.
+    gaps = np.diff(_attempts(lambda k: 2.0 if k == 3 else 0.5)).tolist()
+    assert gaps[:4] == [4, 6, 2, 4]
