@@ -13,6 +13,7 @@ import logging
 import numpy as np
 
 from ngat.state import ATState
+from ngat.threads import factorisation_threads, refinement_threads
 
 __all__ = ["dorfler_marking", "maximum_marking", "mark", "refinable", "refine", "bisect", "rebuild"]
 
@@ -82,7 +83,8 @@ def bisect(state: ATState, marked: np.ndarray) -> int:
         return 0
     with state.timer("refine"):
         state.mesh.SetRefinementFlags(marked.tolist())
-        state.mesh.Refine()
+        with refinement_threads(factorisation_threads()):
+            state.mesh.Refine()
     state.refinements.append(np.flatnonzero(marked))
     return count
 

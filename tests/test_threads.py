@@ -14,9 +14,11 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
-from ngat.threads import FixedThreads
+from ngat import pardiso
+from ngat.threads import SPIN_MS, FixedThreads, _intel_openmp, refinement_threads
 
 SCENE = """
     import dataclasses
@@ -102,3 +104,51 @@ def test_a_busy_machine_is_named_when_the_factorisation_has_several_threads(monk
     assert ngat.threads.oversubscription(1) is None  # one thread waits for nobody
     busy = dict.fromkeys(busy, 0.0)
     assert ngat.threads.oversubscription(2) is None
+
+
+def _refined(threads):
+    """Return the vertices, triangles and a prolongated P1 field after six bisection rounds."""
+    from netgen.geom2d import unit_square
+    from ngsolve import H1, GridFunction, Mesh, x, y
+
+    mesh = Mesh(unit_square.GenerateMesh(maxh=0.05))
+    field = GridFunction(H1(mesh, order=1, autoupdate=True), autoupdate=True)
+    field.Set(x * x + 3 * y)
+    for round in range(6):
+        # The elements about a point moving along the diagonal, as about a running crack tip.
+        coords = mesh.ngmesh.Coordinates()
+        triangles = mesh.ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(int) - 1
+        centres = coords[triangles].mean(axis=1)
+        tip = 0.2 + 0.1 * round
+        mesh.SetRefinementFlags((np.linalg.norm(centres - tip, axis=1) < 0.15).tolist())
+        with refinement_threads(threads):
+            mesh.Refine()
+    return (
+        mesh.ngmesh.Coordinates().copy(),
+        mesh.ngmesh.Elements2D().NumPy()["nodes"][:, :3].copy(),
+        field.vec.FV().NumPy().copy(),
+    )
+
+
+def test_refinement_on_two_threads_gives_the_mesh_and_fields_of_one():
+    one, two = _refined(1), _refined(2)
+    assert len(one[1]) > 4000  # from about 1,000: six rounds refined a good part of the square
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.skipif(not pardiso.AVAILABLE, reason="MKL PARDISO is not installed")
+def test_factorisation_threads_sleep_between_factorisations_during_a_run(monkeypatch):
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    monkeypatch.delenv("KMP_BLOCKTIME", raising=False)
+    openmp = _intel_openmp()
+    before = openmp.kmp_get_blocktime()
+    threads = FixedThreads()
+    assert openmp.kmp_get_blocktime() == SPIN_MS
+    threads.restore()
+    assert openmp.kmp_get_blocktime() == before
+    # A setting of the user's stays.
+    monkeypatch.setenv("KMP_BLOCKTIME", "50")
+    threads = FixedThreads()
+    assert openmp.kmp_get_blocktime() == before
+    threads.restore()
