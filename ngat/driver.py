@@ -123,6 +123,7 @@ def crack_band(scene: Scene, parameters: Parameters) -> CrackBand | None:
     return CrackBand(
         eps, adaptivity.band_h, scene.slits, adaptivity.floor * eps,
         grading=adaptivity.band_grading, search=adaptivity.band_search,
+        onset_h=adaptivity.onset_h,
     )  # fmt: skip
 
 

@@ -317,6 +317,13 @@ class AdaptivityParameters:
         0.18, the grading and the re-meshing a crack runs within 2 % of its speed on
         ``surfing`` from a coarse unstructured mesh (0.25 with the re-meshing and no grading:
         0.963 V; ``docs/adaptivity.md``, items 12 and 13).
+    onset_h
+        Target element diameter, in units of ε, within ``TIP_RADIUS`` · ε (3ε) of a slit tip
+        whose crack has not grown yet (``adapt="band"``; :mod:`ngat.band`): the crack's onset
+        and the singular field about the slit tip ask for finer elements than the band along a
+        crack that runs. 0 (the default): ``band_h``, and these discs follow the band's target.
+        The paper's example sets 0.18 with a band of 0.27: its E(1.0) is that of a band of 0.18
+        (``docs/paper-example.md``).
     band_search
         Coarsening of the crack band while a load step's iteration searches for its crack
         (``adapt="band"``): until the iteration converges the band is resolved to
@@ -360,6 +367,7 @@ class AdaptivityParameters:
     theta: float = 0.5
     marking: str = "dorfler"
     band_h: float = 0.18
+    onset_h: float = 0.0
     band_search: float = 1.0
     band_grading: float = 0.42
     remesh_radius: float = 10.0
@@ -385,6 +393,10 @@ class AdaptivityParameters:
             raise ParameterError(f"marking must be dorfler or maximum, got marking={self.marking}")
         if not self.floor >= 0:
             raise ParameterError(f"floor must be non-negative, got floor={self.floor}")
+        if not 0 <= self.onset_h < math.inf:
+            raise ParameterError(
+                f"onset_h must be a non-negative number (0: band_h), got onset_h={self.onset_h}"
+            )
         if not 1 <= self.band_search < math.inf:
             raise ParameterError(
                 f"band_search must be a number >= 1 (1: no coarser band while a step searches "
@@ -582,6 +594,7 @@ LEGACY_VALUES: dict[str, Any] = {
     "am_stop": "change",
     "band_search": 1.0,
     "crack_extension": False,
+    "onset_h": 0.0,
     "predictor": False,
     "remesh_radius": 0.0,
 }

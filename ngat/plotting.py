@@ -433,6 +433,7 @@ PARAMETER_LABELS = {
     "tol_rel": "relative tolerance (TOL / I^½)",
     "theta": "marking parameter θ",
     "band_h": "crack-band element size [ε]",
+    "onset_h": "element size at uncracked slit tips [ε]",
     "band_search": "crack band while searching [band_h]",
     "floor": "element floor [ε]",
     "max_refinements": "refinements per step at most",

@@ -101,6 +101,34 @@ def test_predictor_resolves_the_slit_tips_and_nothing_far_away():
     assert band.refine(state) == 0  # resolved: a second call does nothing
 
 
+def test_slit_tips_are_resolved_to_onset_h_until_their_cracks_grow():
+    # A band of 0.35ε with onset_h = 0.18: before the first step both slit tips' discs are
+    # resolved to 0.18ε; once a crack has grown ε from its slit, its tip's disc follows the band.
+    eps = 0.05
+    scene, state, plain = two_slits_state(eps)
+    band = CrackBand(eps, 0.35, scene.slits, 0.08 * eps, onset_h=0.18)
+    assert band.refine(state) > 0
+    arrays = state.arrays
+    centroids = arrays.coords[arrays.elements].mean(axis=1)
+    for _, tip in scene.slits:
+        near = np.linalg.norm(centroids - tip, axis=1) < TIP_RADIUS * eps
+        assert near.sum() > 100
+        assert arrays.diameter[near].max() <= 0.18 * eps < band.target
+    # Marking alone, about the tip of a crack grown 10ε from the first slit and the second
+    # slit's own tip: onset_h about the second, the band's target about the first.
+    _, fresh, _ = two_slits_state(eps)
+    coords, elements, diameter = fresh.arrays.coords, fresh.arrays.elements, fresh.arrays.diameter
+    tips = np.array([[2.0, 2.5], scene.slits[1][1]])
+    assert band.at_onset(tips).tolist() == [False, True]
+    marked = band.marked(coords, elements, np.empty((0, 2)), tips, diameter)
+    for tip, target in zip(tips, (band.target, 0.18 * eps), strict=True):
+        disc = band_elements(coords, elements, diameter, tip[None], TIP_RADIUS * eps)
+        assert disc.any()
+        np.testing.assert_array_equal(marked[disc], diameter[disc] > target)
+    assert not marked[~band_elements(coords, elements, diameter, tips, TIP_RADIUS * eps)].any()
+    assert not plain.at_onset(tips).any()  # onset_h = 0: every tip follows the band
+
+
 def test_damaged_set_and_its_buffer_are_resolved():
     eps = 0.05
     _, state, band = two_slits_state(eps)
@@ -178,6 +206,8 @@ def test_band_parameters_are_checked():
     assert Parameters().adaptivity.adapt == "band"
     with pytest.raises(ParameterError, match="band_search must be a number >= 1"):
         Parameters().replace(band_search=0.5)
+    with pytest.raises(ParameterError, match="onset_h must be a non-negative number"):
+        Parameters().replace(onset_h=-0.1)
 
 
 @pytest.mark.parametrize("search", [1.0, 2.0])
