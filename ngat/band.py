@@ -301,7 +301,10 @@ class CrackBand:
     ) -> np.ndarray:
         """Return the elements wider than the target within the band around the centres.
 
-        About the tips of :meth:`at_onset` the target is ``onset_h · ε``.
+        About the slit tips whose crack tip is at onset (:meth:`at_onset`) the target is
+        ``onset_h · ε``: about the slit's tip, which the singular field and the crack's onset
+        surround, not about the tip of v, which moves by up to ε before the crack counts as
+        grown (a disc that followed it was refined again at every iteration of the step).
 
         Parameters
         ----------
@@ -320,8 +323,8 @@ class CrackBand:
         onset, radius = self.at_onset(tips), TIP_RADIUS * self.eps
         if onset.any():
             fine = np.flatnonzero(diameter > self.onset)
-            at_tips = band_elements(coords, elements[fine], diameter[fine], tips[onset], radius)
-            marked[fine] = at_tips
+            slit_tips = np.array([tip for _, tip in self.slits], dtype=float)[onset]
+            marked[fine] = band_elements(coords, elements[fine], diameter[fine], slit_tips, radius)
             tips = tips[~onset]
         coarse = np.flatnonzero(diameter > self.target)
         if len(coarse) == 0:
