@@ -32,7 +32,7 @@ scene = Scene(
     times=np.round(0.01 * np.arange(161), 10),
     # The slit tips are resolved to 0.18ε until their cracks grow, the crack band to 0.27ε: E(1.0)
     # is that of a band of 0.18ε, the fracture time 1.40 (the reference's 1.39), the run takes
-    # 0.77 of the time with a quarter fewer elements (docs/paper-example.md). The break step's
+    # 0.82 of the time with a fifth fewer elements (docs/paper-example.md). The break step's
     # cracks find their path on a band of 0.54ε and are then resolved to 0.27ε.
     parameters={"band_h": 0.27, "onset_h": 0.18, "band_search": 2.0},
     # --quick: every fifth load step, a coarser start, a coarser element floor, crack band and
