@@ -8,9 +8,10 @@ Scenes: ``two-slits`` (the paper's example, docs/design.md scene 1) and ``surfin
 default: ε = 0.01, A = 1.1, V = 0.2, from the uniform mesh of squares of side 0.1). Methods,
 each with the scene's full load history (no fewer steps for either):
 
-- adaptive: the default ``adapt=band`` (Algorithm 2 and the crack band of 0.18ε, graded and
-  re-meshed about running cracks) at the relative tolerance ``tol_rel`` ∈ {0.36, 0.18, 0.09,
-  0.045} (0.17 is the default), all else default
+- adaptive: the default ``adapt=band`` (Algorithm 2 and the scene's crack band, graded and
+  re-meshed about running cracks: 0.18ε on surfing; 0.27ε on two-slits, whose slit tips are
+  resolved to 0.18ε until their cracks grow) at the relative tolerance
+  ``tol_rel`` ∈ {0.36, 0.18, 0.09, 0.045} (0.17 is the default), all else default
   (floor ε/50, am_tol = 1e-3); ``--paper`` runs Algorithm 2 alone (``adapt=paper``) at the
   absolute TOL = tol_rel / 0.6 instead (0.3 for tol_rel 0.18);
 - uniform: ``adapt=fixed`` on the scene's initial mesh with ``maxh = h``, h ∈ {0.1, 0.05,
