@@ -10,6 +10,7 @@ from ngat.band import (
     BUFFER,
     DAMAGED,
     FEW_CENTRES,
+    ONSET_RADIUS,
     TIP_RADIUS,
     CrackBand,
     band_elements,
@@ -102,8 +103,9 @@ def test_predictor_resolves_the_slit_tips_and_nothing_far_away():
 
 
 def test_slit_tips_are_resolved_to_onset_h_until_their_cracks_grow():
-    # A band of 0.35ε with onset_h = 0.18: before the first step both slit tips' discs are
-    # resolved to 0.18ε; once a crack has grown ε from its slit, its tip's disc follows the band.
+    # A band of 0.35ε with onset_h = 0.18: before the first step the discs of ONSET_RADIUS about
+    # both slit tips are resolved to 0.18ε; once a crack has grown ε from its slit, its tip's
+    # disc (TIP_RADIUS) follows the band.
     eps = 0.05
     scene, state, plain = two_slits_state(eps)
     band = CrackBand(eps, 0.35, scene.slits, 0.08 * eps, onset_h=0.18)
@@ -111,8 +113,8 @@ def test_slit_tips_are_resolved_to_onset_h_until_their_cracks_grow():
     arrays = state.arrays
     centroids = arrays.coords[arrays.elements].mean(axis=1)
     for _, tip in scene.slits:
-        near = np.linalg.norm(centroids - tip, axis=1) < TIP_RADIUS * eps
-        assert near.sum() > 100
+        near = np.linalg.norm(centroids - tip, axis=1) < ONSET_RADIUS * eps
+        assert near.sum() > 50
         assert arrays.diameter[near].max() <= 0.18 * eps < band.target
     # Marking alone, about the tip of a crack grown 10ε from the first slit and the second
     # slit's own tip: onset_h about the second, the band's target about the first.
@@ -121,11 +123,15 @@ def test_slit_tips_are_resolved_to_onset_h_until_their_cracks_grow():
     tips = np.array([[2.0, 2.5], scene.slits[1][1]])
     assert band.at_onset(tips).tolist() == [False, True]
     marked = band.marked(coords, elements, np.empty((0, 2)), tips, diameter)
-    for tip, target in zip(tips, (band.target, 0.18 * eps), strict=True):
-        disc = band_elements(coords, elements, diameter, tip[None], TIP_RADIUS * eps)
+    for tip, target, radius in zip(
+        tips, (band.target, 0.18 * eps), (TIP_RADIUS, ONSET_RADIUS), strict=True
+    ):
+        disc = band_elements(coords, elements, diameter, tip[None], radius * eps)
         assert disc.any()
         np.testing.assert_array_equal(marked[disc], diameter[disc] > target)
-    assert not marked[~band_elements(coords, elements, diameter, tips, TIP_RADIUS * eps)].any()
+    discs = band_elements(coords, elements, diameter, tips[:1], TIP_RADIUS * eps)
+    discs |= band_elements(coords, elements, diameter, tips[1:], ONSET_RADIUS * eps)
+    assert not marked[~discs].any()
     assert not plain.at_onset(tips).any()  # onset_h = 0: every tip follows the band
 
 
