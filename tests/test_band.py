@@ -87,16 +87,24 @@ def resolve_crack_line(state, band, rounds):
             break
 
 
+def assert_slit_tips_resolved(scene, state, radius, size, count):
+    """Assert that more than ``count`` elements lie within ``radius`` of each slit tip, none of
+    them wider than ``size``; return the elements' centroids."""
+    arrays = state.arrays
+    centroids = arrays.coords[arrays.elements].mean(axis=1)
+    for _, tip in scene.slits:
+        near = np.linalg.norm(centroids - tip, axis=1) < radius
+        assert near.sum() > count
+        assert arrays.diameter[near].max() <= size
+    return centroids
+
+
 def test_predictor_resolves_the_slit_tips_and_nothing_far_away():
     eps = 0.05
     scene, state, band = two_slits_state(eps)
     assert band.refine(state) > 0
+    centroids = assert_slit_tips_resolved(scene, state, TIP_RADIUS * eps, band.target, 100)
     arrays = state.arrays
-    centroids = arrays.coords[arrays.elements].mean(axis=1)
-    for _, tip in scene.slits:
-        near = np.linalg.norm(centroids - tip, axis=1) < TIP_RADIUS * eps
-        assert near.sum() > 100
-        assert arrays.diameter[near].max() <= band.target
     far = np.linalg.norm(centroids - [3.0, 3.0], axis=1) > 1.0
     assert arrays.diameter[far].max() > 10 * band.target  # the rest stays coarse
     assert band.refine(state) == 0  # resolved: a second call does nothing
@@ -110,12 +118,8 @@ def test_slit_tips_are_resolved_to_onset_h_until_their_cracks_grow():
     scene, state, plain = two_slits_state(eps)
     band = CrackBand(eps, 0.35, scene.slits, 0.08 * eps, onset_h=0.18)
     assert band.refine(state) > 0
-    arrays = state.arrays
-    centroids = arrays.coords[arrays.elements].mean(axis=1)
-    for _, tip in scene.slits:
-        near = np.linalg.norm(centroids - tip, axis=1) < ONSET_RADIUS * eps
-        assert near.sum() > 50
-        assert arrays.diameter[near].max() <= 0.18 * eps < band.target
+    assert_slit_tips_resolved(scene, state, ONSET_RADIUS * eps, 0.18 * eps, 50)
+    assert 0.18 * eps < band.target
     # Marking alone, about the tip of a crack grown 10ε from the first slit and the second
     # slit's own tip: onset_h about the second, the band's target about the first.
     _, fresh, _ = two_slits_state(eps)
