@@ -291,7 +291,8 @@ class CrackBand:
     def at_onset(self, tips: np.ndarray) -> np.ndarray:
         """Return which tips are resolved to ``onset_h · ε``: those of cracks that have not grown.
 
-        None without ``onset_h``: every tip's disc then follows the band's target.
+        No tip without ``onset_h``: every tip's disc is then the band's, of ``TIP_RADIUS · ε``
+        at its target.
         """
         if not self.onset or not self.slits:
             return np.zeros(len(tips), dtype=bool)

@@ -322,7 +322,8 @@ class AdaptivityParameters:
         Target element diameter, in units of ε, within ``ONSET_RADIUS`` · ε (2ε) of a slit tip
         whose crack has not grown yet (``adapt="band"``; :mod:`ngat.band`): the crack's onset
         and the singular field about the slit tip ask for finer elements than the band along a
-        crack that runs. 0 (the default): ``band_h``, and these discs follow the band's target.
+        crack that runs. 0 (the default): none; the band's discs of 3ε about every crack tip
+        resolve the slit tips to ``band_h`` as well.
         The paper's example sets 0.18 with a band of 0.27: E(1.0) +0.091 % off its converged
         reference, against +0.102 % with the slit tips in the band (``docs/paper-example.md``).
     band_search
