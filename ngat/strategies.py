@@ -329,9 +329,13 @@ class NewtonSwitch:
         self.am_tol = am_tol
         self.contraction = contraction
         self.newton: NewtonSolver | None = None
-        self.below, self.previous = switch, np.inf
+        self._reset()
+
+    def _reset(self) -> None:
+        """Forget the load step's threshold, counts, last I_j and mesh, and Newton's wait."""
+        self.below, self.previous = self.switch, np.inf
         self.newton_steps = self.escapes = self.rejected = 0
-        self.energy, self.elements = np.inf, 0
+        self.energy, self.elements = np.inf, 0  # I_j and mesh after the last iteration
         self.wait = self.waiting = 0
 
     @property
@@ -354,10 +358,7 @@ class NewtonSwitch:
         if self.newton is None or self.newton.half_steps is not half_steps:
             self.newton = NewtonSolver(state, half_steps)
         self.newton.restart()
-        self.below, self.previous = self.switch, np.inf
-        self.newton_steps = self.escapes = self.rejected = 0
-        self.energy, self.elements = np.inf, 0  # I_j and mesh after the last iteration
-        self.wait = self.waiting = 0
+        self._reset()
 
     def accept_u_step(self, state: ATState) -> bool:
         """Apply the iteration's safeguard."""
