@@ -157,19 +157,30 @@ def estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
     with I_j^{1/2} (:func:`tolerance`) whatever the material's units: μ² is divided by the
     stiffness scale of the model (:attr:`ngat.elasticity.Elasticity.modulus`) and ν², the
     indicator of the v-equation divided by G_c, is multiplied by G_c. For the anti-plane model
-    with G_c = 1 (the paper) both are Proposition 4's.
+    with G_c = 1 (the paper) both are Proposition 4's. Computed once per mesh and values of u,
+    v and CR (:meth:`ngat.state.ATState.of_values`): a step's record takes the ν of its last
+    v-step; the result is read-only.
     """
     with state.timer("estimate"):
-        model = state.model
-        if stage == "u":
-            return mu_estimator(
-                state.arrays, state.edges, state.u_values, state.v_values, model.eta,
-                state.dirichlet_vertices, state.elasticity, state.dirichlet,
-            ) / state.elasticity.modulus  # fmt: skip
-        return nu_estimator(
+        inputs = (state.u_values, state.v_values) + ((crack,) if stage == "v" else ())
+        return state.of_values(("estimate", stage), inputs, lambda: _estimate(state, stage, crack))
+
+
+def _estimate(state: ATState, stage: str, crack: np.ndarray) -> np.ndarray:
+    """:func:`estimate`, computed."""
+    model = state.model
+    if stage == "u":
+        indicators = mu_estimator(
+            state.arrays, state.edges, state.u_values, state.v_values, model.eta,
+            state.dirichlet_vertices, state.elasticity, state.dirichlet,
+        ) / state.elasticity.modulus  # fmt: skip
+    else:
+        indicators = nu_estimator(
             state.arrays, state.edges, state.u_values, state.v_values, model.surface, crack,
             state.elasticity, model.gc,
         ) * model.gc  # fmt: skip
+    indicators.flags.writeable = False
+    return indicators
 
 
 def tolerance(state: ATState, adaptivity: AdaptivityParameters) -> float:

@@ -250,11 +250,22 @@ class ATState:
         step, at 45 ms each at 180k elements. ``key`` names the measure; a change of the mesh
         or of any value of v computes it anew.
         """
+        return self.of_values(key, (self.v_values,), compute)
+
+    def of_values(
+        self, key: Hashable, inputs: tuple[np.ndarray, ...], compute: Callable[[], T]
+    ) -> T:
+        """Return ``compute()``, computed once per mesh and values of the arrays ``inputs``.
+
+        The memo of :meth:`of_v` for measures of several arrays (the estimators of u and v):
+        ``key`` names the measure, and a change of the mesh or of any value of an input
+        computes it anew.
+        """
         stored = self._of_v.get(key)
-        if stored is not None and np.array_equal(stored[0], self.v_values):
+        if stored is not None and all(map(np.array_equal, stored[0], inputs)):
             return stored[1]
         value = compute()
-        self._of_v[key] = (self.v_values.copy(), value)
+        self._of_v[key] = (tuple(np.array(array) for array in inputs), value)
         return value
 
     # -- views ------------------------------------------------------------------------------

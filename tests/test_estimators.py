@@ -32,6 +32,7 @@ from ngat.estimators import EdgeTopology, mu_estimator, nu_estimator
 from ngat.forms import MeshArrays, row_sum
 from ngat.geometries.smooth_laplace import exact_gradient as smooth_gradient
 from ngat.halfsteps import HalfStepSolvers
+from ngat.minimization import estimate
 from ngat.parameters import ModelParameters
 from ngat.refinement import dorfler_marking
 from ngat.scene import load_scene
@@ -334,3 +335,40 @@ def test_element_sums_are_row_sums_of_the_gathered_edges_to_the_last_bit():
     np.testing.assert_array_equal(
         edges.element_sum(per_edge), row_sum(per_edge[edges.element_edges])
     )
+
+
+def test_estimate_is_computed_once_per_mesh_and_values():
+    # The record of a load step takes the ν of its last v-step from the memo: the memo must
+    # give the numbers of a fresh evaluation, and a change of u, v or CR must compute anew.
+    scene = load_scene("two-slits")
+    state = ATState(scene.make_mesh(0.5), ModelParameters(eps=0.1, eta=1e-3), scene.loads)
+    steps = HalfStepSolvers(state)
+    state.apply_load(1.0)
+    crack = np.abs(state.arrays.coords[:, 1] - 3) < 0.4
+    steps.solve_u()
+    steps.solve_v(crack)
+    fresh = {
+        "u": mu_estimator(
+            state.arrays,
+            state.edges,
+            state.u_values,
+            state.v_values,
+            state.model.eta,
+            state.dirichlet_vertices,
+        ),  # fmt: skip
+        "v": nu_estimator(
+            state.arrays, state.edges, state.u_values, state.v_values, state.model.surface, crack
+        ),
+    }
+    for stage, expected in fresh.items():
+        first = estimate(state, stage, crack)
+        np.testing.assert_array_equal(first, expected)
+        assert estimate(state, stage, crack.copy()) is first
+        assert not first.flags.writeable
+    nu = estimate(state, "v", crack)
+    assert estimate(state, "v", crack & (state.arrays.coords[:, 0] < 3)).sum() != nu.sum()
+    steps.solve_u()  # a new u: μ anew
+    mu = estimate(state, "u", crack)
+    assert not np.array_equal(mu, fresh["u"])
+    state.v_values[0] *= 0.5
+    assert estimate(state, "u", crack) is not mu
