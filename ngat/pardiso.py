@@ -307,7 +307,12 @@ def vertex_ordering(matrix: SparseMatrixd) -> np.ndarray:
     """Return METIS's fill-reducing ordering of a P1 matrix's graph (vertex ``ordering[i]`` first).
 
     One per mesh serves every factorisation on it (:class:`PardisoInverse`'s ``ordering``):
-    a_j and b_j with their free DOFs, Newton's Hessian with its DOFs vertex by vertex.
+    a_j and b_j with their free DOFs, Newton's Hessian with its DOFs vertex by vertex. The
+    analysis that computed it is released, though b_j on all DOFs could factorise on it (one
+    analysis of 15–25 ms fewer per mesh): factorisations on an analysis that ran METIS, in
+    either version, are not repeatable to the last bit (two of six differed at 49k DOFs, and
+    refactorising on one analysis differed too), those with the ordering given are, and a
+    resumed run must repeat the uninterrupted one.
     """
     _, indptr, indices = _upper_triangle(matrix, np.arange(matrix.height))
     return Pardiso(indptr, indices, definite=True).ordering.astype(np.int64)
