@@ -11,8 +11,9 @@ duration of a run (threadpoolctl for the BLAS and OpenMP libraries loaded in the
 reports them for ``summary.json``. One thread each is also the fastest on two cores
 (``README.md``).
 
-MKL PARDISO's factorisations are the exception: they gave the same bits with one thread and
-with two in every comparison made (``tests/test_pardiso.py``, and the quick two-slits run's
+MKL PARDISO's factorisations are the exception: with MKL's conditional numerical
+reproducibility on (:data:`ngat.pardiso.MKL_CBWR_AUTO`) they gave the same bits with one thread
+and with two in every comparison made (``tests/test_pardiso.py``, and the quick two-slits run's
 ``energies.csv``), and two threads factorise about 1.5 times faster on the example's meshes.
 MKL therefore gets :func:`factorisation_threads`, the cores the process may use unless
 ``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :func:`oversubscription`
