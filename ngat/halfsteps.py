@@ -135,6 +135,7 @@ class HalfStepSolvers:
         self._v_residual = operators.b_matrix.CreateColVector()
         self._v_step = operators.b_matrix.CreateColVector()
         self._bound_active = 0
+        self._prepared: tuple | None = None
 
     # -- u-step -----------------------------------------------------------------------------
     def solve_u(self, max_iterations: int = 50) -> None:
@@ -207,23 +208,61 @@ class HalfStepSolvers:
         crack
             Boolean DOF mask of CR(t_k), where v is fixed to 0.
         """
-        state, operators = self.state, self.operators
-        # The direct solver factorises b_j on all DOFs with CR decoupled (identity-like rows):
-        # its ordering serves every v-step on the mesh however CR grows.
+        state = self.state
         direct = self.linear_solver == "direct"
-        with state.timer("assembly"):
-            operators.assemble_b(crack if direct else None)
-            state.v_values[crack] = 0.0
+        if not self._prepared_for(crack):
+            self._assemble_v(crack)
+            with state.timer("solve"):
+                factorised = np.ones_like(crack) if direct else ~crack
+                self._b_solver = self._refreshed(self._b_solver, "v", factorised)
+        state.v_values[crack] = 0.0
         with state.timer("solve"):
             free = ~crack
-            factorised = np.ones_like(free) if direct else free
-            self._b_solver = self._refreshed(self._b_solver, "v", factorised)
             self._v_correction(self._b_solver, crack)
             if state.model.irreversibility == "pointwise":
                 upper = state.v_prev.vec.FV().NumPy().copy()
                 self._bound_active = self._enforce_bounds(free, upper)
             elif self.bounded_v:
                 self._bound_active = self._enforce_bounds(free, 1.0)
+
+    def prepare_v(self, crack: np.ndarray) -> None:
+        """Assemble the next v-step's b_j(u) and start factorising it; return at once.
+
+        The factorisation runs in the background (:meth:`ngat.linear.LaggedCholesky.refresh`)
+        while the caller computes on — μ of the u-step just solved (Algorithm 2, step 2.1) —
+        and :meth:`solve_v` on the same mesh, u and CR uses it; any other v-step assembles
+        anew. The direct solver only; the numbers are those of :meth:`solve_v` alone.
+        """
+        if self.linear_solver != "direct":
+            return
+        self._assemble_v(crack)
+        with self.state.timer("solve"):
+            self._b_solver = self._refreshed(self._b_solver, "v", np.ones_like(crack))
+            self._b_solver.refresh(background=True)
+        self._prepared = (self.state.arrays, self.state.u_values.copy(), crack.copy())
+
+    def _prepared_for(self, crack: np.ndarray) -> bool:
+        """Return whether :meth:`prepare_v` assembled b_j for this mesh, u and CR; forget it."""
+        prepared, self._prepared = self._prepared, None
+        if prepared is None:
+            return False
+        arrays, u, prepared_crack = prepared
+        state = self.state
+        return (
+            arrays is state.arrays
+            and np.array_equal(u, state.u_values)
+            and np.array_equal(prepared_crack, crack)
+        )
+
+    def _assemble_v(self, crack: np.ndarray) -> None:
+        """Write b_j(u)'s values; the direct solver's with CR decoupled (identity-like rows).
+
+        Decoupled, the crack's DOFs stay in the factorisation: its ordering serves every
+        v-step on the mesh however CR grows.
+        """
+        direct = self.linear_solver == "direct"
+        with self.state.timer("assembly"):
+            self.operators.assemble_b(crack if direct else None)
 
     def _v_correction(
         self,

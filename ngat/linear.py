@@ -33,7 +33,7 @@ from ngsolve import BilinearForm, BitArray, IntRange, Preconditioner
 from ngsolve.krylovspace import CGSolver
 from ngsolve.la import BaseMatrix, BaseVector, Embedding, SparseMatrixd
 
-from ngat.pardiso import sparse_inverse
+from ngat.pardiso import PardisoInverse, sparse_inverse
 
 __all__ = ["LaggedCholesky", "HeldCholesky", "AMGConjugateGradient"]
 
@@ -107,10 +107,17 @@ class LaggedCholesky:
         self.refresh()
         out.data = self.inverse * rhs
 
-    def refresh(self) -> None:
-        """Refactorise with the current values if they changed since the last factorisation."""
+    def refresh(self, background: bool = False) -> None:
+        """Refactorise with the current values if they changed since the last factorisation.
+
+        ``background``: with PARDISO the factorisation runs on while the caller computes, and
+        the next solve waits for it (:meth:`ngat.pardiso.Pardiso.factorise`).
+        """
         if self.stale:
-            self.inverse.Update()
+            if isinstance(self.inverse, PardisoInverse):
+                self.inverse.Update(background)
+            else:
+                self.inverse.Update()
             self._factored = self._values_to_keep()
             self.factorizations += 1
             self.stale = False

@@ -240,6 +240,7 @@ def _half_step(
         crack = state.crack_set()
         if stage == "u":
             half_steps.solve_u()
+            half_steps.prepare_v(crack)  # b_j(u^n) factorises while μ is computed
         else:
             half_steps.solve_v(crack)
         if adaptivity.adapt not in ("paper", "band"):

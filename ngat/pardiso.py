@@ -21,6 +21,8 @@ import ctypes
 import importlib.metadata
 import os
 import weakref
+from concurrent.futures import Future, ThreadPoolExecutor
+from functools import cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -167,10 +169,11 @@ class Pardiso:
         self.ordering = np.zeros(self.n, dtype=np.int32)
         if ordering is not None:
             self.ordering[:] = ordering
+        self._pending: list[Future | None] = [None]  # a factorisation under way, if any
         if self.n:
             self._call(11)
             # Released when the object goes, or at exit before the modules are torn down.
-            weakref.finalize(self, _pardiso, self._handle, self._mtype, -1, self.iparm)
+            weakref.finalize(self, _release, self._handle, self._mtype, self.iparm, self._pending)
 
     def _call(self, phase: int) -> None:
         arrays = (self._values, self._indptr, self._indices, self.ordering, self._rhs, self._out)
@@ -183,14 +186,26 @@ class Pardiso:
         finally:
             _MKL.MKL_Set_Num_Threads_Local(threads)
 
-    def factorise(self, values: np.ndarray) -> None:
-        """Compute the numeric factorisation for the upper triangle's ``values``."""
+    def factorise(self, values: np.ndarray, background: bool = False) -> None:
+        """Compute the numeric factorisation for the upper triangle's ``values``.
+
+        With ``background`` the factorisation runs in a worker thread (:func:`_worker`) and
+        this returns at once: the caller computes on meanwhile, and the next call that needs
+        the factors waits for them. PARDISO runs outside Python's global interpreter lock, so
+        the two overlap on two cores; the factors are the same to the last bit.
+        """
+        _wait(self._pending)
         self._values[:] = values
-        if self.n:
+        if not self.n:
+            return
+        if background:
+            self._pending[0] = _worker().submit(self._call, 22)
+        else:
             self._call(22)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Return A⁻¹ ``rhs`` with the last factorisation."""
+        _wait(self._pending)
         self._rhs[:] = rhs
         if self.n:
             self._call(33)
@@ -199,7 +214,31 @@ class Pardiso:
     @property
     def negative_eigenvalues(self) -> int:
         """Negative eigenvalues of the last factorised matrix (symmetric indefinite only)."""
+        _wait(self._pending)
         return int(self.iparm[22])
+
+
+@cache
+def _worker() -> ThreadPoolExecutor:
+    """Return the one thread that runs background factorisations, in the order submitted."""
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="ngat-pardiso")
+
+
+def _wait(pending: list[Future | None]) -> None:
+    """Wait for the factorisation under way in ``pending`` (raising its error), if any."""
+    future, pending[0] = pending[0], None
+    if future is not None:
+        future.result()
+
+
+def _release(
+    handle: np.ndarray, mtype: int, iparm: np.ndarray, pending: list[Future | None]
+) -> None:
+    """Free PARDISO's memory of a factorisation once no phase of it is under way."""
+    try:
+        _wait(pending)
+    finally:
+        _pardiso(handle, mtype, -1, iparm)
 
 
 def _ptr(array: np.ndarray):
@@ -273,16 +312,17 @@ class PardisoInverse(BaseMatrix):
         self.factor = Pardiso(indptr, indices, definite, ordering)
         self.Update()
 
-    def Update(self) -> None:
-        """Refactorise with the matrix's current values.
+    def Update(self, background: bool = False) -> None:
+        """Refactorise with the matrix's current values, in the ``background`` if asked.
 
-        Values that are not finite are not factorised: the solves then give NaN, as NGSolve's
+        :meth:`Pardiso.factorise` says what runs in the background. Values that are not
+        finite are not factorised: the solves then give NaN, as NGSolve's
         sparse Cholesky does, and the iteration that produced them stops with its message.
         """
         values = self.matrix.AsVector().FV().NumPy()[self._take]
         self.finite = bool(np.isfinite(values).all())
         if self.finite:
-            self.factor.factorise(values)
+            self.factor.factorise(values, background)
 
     def Mult(self, x: BaseVector, y: BaseVector) -> None:
         """Set y = A⁻¹ x on the free DOFs and 0 on the others."""
