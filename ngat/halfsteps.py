@@ -136,6 +136,7 @@ class HalfStepSolvers:
         self._v_step = operators.b_matrix.CreateColVector()
         self._bound_active = 0
         self._prepared: tuple | None = None
+        self._prepared_u: tuple | None = None
 
     # -- u-step -----------------------------------------------------------------------------
     def solve_u(self, max_iterations: int = 50) -> None:
@@ -151,12 +152,16 @@ class HalfStepSolvers:
         """
         state, operators = self.state, self.operators
         u = state.u_values
+        prepared = self._prepared_u_for()
         for _ in range(max_iterations):
             tension = state.elasticity.tension(state.arrays, u)
-            with state.timer("assembly"):
-                operators.assemble_a()
+            if not prepared:
+                with state.timer("assembly"):
+                    operators.assemble_a()
             with state.timer("solve"):
-                self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
+                if not prepared:
+                    self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
+                prepared = False
                 self._residual.data = -1 * (operators.a_matrix * state.u.vec)
                 self._solve(self._a_solver)
             if tension is None:
@@ -166,6 +171,35 @@ class HalfStepSolvers:
             if self._split_step(step, tension):
                 return
         log.warning("split u-step: not converged after %d Newton iterations", max_iterations)
+
+    def prepare_u(self) -> None:
+        """Assemble the next u-step's a_j(v) and start factorising it; return at once.
+
+        As :meth:`prepare_v`: the factorisation runs on while the caller computes ν, the crack
+        band and the energies of the v-step just solved, and :meth:`solve_u` on the same mesh
+        and v uses it, in the next load step too. Without an energy split only (with one, a_j
+        depends on u's pattern).
+        """
+        state = self.state
+        if (
+            self.linear_solver != "direct"
+            or state.elasticity.tension(state.arrays, state.u_values) is not None
+        ):
+            return
+        with state.timer("assembly"):
+            self.operators.assemble_a()
+        with state.timer("solve"):
+            self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
+            self._a_solver.refresh(background=True)
+        self._prepared_u = (state.arrays, state.v_values.copy())
+
+    def _prepared_u_for(self) -> bool:
+        """Return whether :meth:`prepare_u` assembled a_j for this mesh and v; forget it."""
+        prepared, self._prepared_u = self._prepared_u, None
+        if prepared is None:
+            return False
+        arrays, v = prepared
+        return arrays is self.state.arrays and np.array_equal(v, self.state.v_values)
 
     def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
         """Move u along a semismooth Newton step; return whether the u-step has converged."""

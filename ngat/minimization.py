@@ -243,6 +243,7 @@ def _half_step(
             half_steps.prepare_v(crack)  # b_j(u^n) factorises while μ is computed
         else:
             half_steps.solve_v(crack)
+            half_steps.prepare_u()  # a_j(v^n) factorises while ν and the rest are computed
         if adaptivity.adapt not in ("paper", "band"):
             return
         if not _refine_by(state, [estimate(state, stage, crack)], adaptivity, result, stage):

@@ -36,6 +36,7 @@ __all__ = [
     "PardisoInverse",
     "sparse_inverse",
     "vertex_ordering",
+    "wait_background",
 ]
 
 
@@ -178,6 +179,7 @@ class Pardiso:
     def _call(self, phase: int) -> None:
         arrays = (self._values, self._indptr, self._indices, self.ordering, self._rhs, self._out)
         if not self._sequential:
+            wait_background()  # MKL's threads need both cores
             _pardiso(self._handle, self._mtype, phase, self.iparm, arrays)
             return
         threads = _MKL.MKL_Set_Num_Threads_Local(1)
@@ -222,6 +224,16 @@ class Pardiso:
 def _worker() -> ThreadPoolExecutor:
     """Return the one thread that runs background factorisations, in the order submitted."""
     return ThreadPoolExecutor(max_workers=1, thread_name_prefix="ngat-pardiso")
+
+
+def wait_background() -> None:
+    """Wait until no factorisation runs in the background, before work on several threads.
+
+    Threads that wait for each other at every step (MKL's, NGSolve's TaskManager) slow down
+    many times when a core they need is busy (:func:`ngat.threads.oversubscription`).
+    """
+    if _worker.cache_info().currsize:
+        _worker().submit(int).result()
 
 
 def _wait(pending: list[Future | None]) -> None:

@@ -12,6 +12,7 @@ import logging
 
 import numpy as np
 
+from ngat.pardiso import wait_background
 from ngat.state import ATState
 from ngat.threads import factorisation_threads, refinement_threads
 
@@ -83,6 +84,7 @@ def bisect(state: ATState, marked: np.ndarray) -> int:
         return 0
     with state.timer("refine"):
         state.mesh.SetRefinementFlags(marked.tolist())
+        wait_background()
         with refinement_threads(factorisation_threads()):
             state.mesh.Refine()
     state.refinements.append(np.flatnonzero(marked))
