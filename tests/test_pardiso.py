@@ -180,3 +180,39 @@ def test_two_threads_factorise_to_the_same_bits_as_one(definite):
     assert len(set(inertias)) == 1 and (inertias[0] > 0) != definite
     residual = as_scipy(form.mat) @ solutions[0] - rhs
     assert np.abs(residual[free]).max() < 1e-8 * np.abs(rhs).max()
+
+
+@needs_mkl
+def test_a_background_factorisation_gives_the_same_bits_and_the_solve_waits_for_it(p1):
+    stiffness, mass, free = p1
+    matrix = as_ngsolve(stiffness + mass)
+    rhs = np.random.default_rng(5).random(matrix.height)
+    inverse = PardisoInverse(matrix, free)
+    matrix.AsVector().FV().NumPy()[:] = (stiffness + 7.0 * mass).data
+    inverse.Update()
+    expected = solve(inverse, matrix, rhs)
+    matrix.AsVector().FV().NumPy()[:] = (stiffness + mass).data
+    inverse.Update()
+    matrix.AsVector().FV().NumPy()[:] = (stiffness + 7.0 * mass).data
+    inverse.Update(background=True)  # returns at once; the next solve waits for the factors
+    assert np.array_equal(solve(inverse, matrix, rhs), expected)
+
+
+@needs_mkl
+def test_a_definite_matrix_factorises_to_the_same_bits_whatever_mkls_threads():
+    """The two-level factorisation runs on one thread, however many MKL has (TWO_LEVEL)."""
+    space = H1(MakeStructured2DMesh(nx=160, ny=160), order=1, dirichlet="left")
+    u, w = space.TnT()
+    form = BilinearForm((1 + x * y) * grad(u) * grad(w) * dx).Assemble()
+    free = np.array(space.FreeDofs(), dtype=bool)
+    rhs = np.cos(np.arange(space.ndof))
+    ordering = vertex_ordering(form.mat)
+    solutions = []
+    for threads in (2, 1, 2):
+        with threadpool_limits(limits={"libmkl_rt": threads}):
+            inverse = PardisoInverse(form.mat, free, ordering=ordering)
+            assert inverse.factor.iparm[23] == ngat.pardiso.TWO_LEVEL
+            solutions.append(solve(inverse, form.mat, rhs))
+    assert all(np.array_equal(s, solutions[0]) for s in solutions)
+    residual = as_scipy(form.mat) @ solutions[0] - rhs
+    assert np.abs(residual[free]).max() < 1e-8 * np.abs(rhs).max()
