@@ -189,7 +189,7 @@ class HalfStepSolvers:
         with state.timer("assembly"):
             self.operators.assemble_a()
         with state.timer("solve"):
-            self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
+            self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet, True)
             self._a_solver.refresh(background=True)
         self._prepared_u = (state.arrays, state.v_values.copy())
 
@@ -271,7 +271,7 @@ class HalfStepSolvers:
             return
         self._assemble_v(crack)
         with self.state.timer("solve"):
-            self._b_solver = self._refreshed(self._b_solver, "v", np.ones_like(crack))
+            self._b_solver = self._refreshed(self._b_solver, "v", np.ones_like(crack), True)
             self._b_solver.refresh(background=True)
         self._prepared = (self.state.arrays, self.state.u_values.copy(), crack.copy())
 
@@ -358,12 +358,17 @@ class HalfStepSolvers:
 
     # -- linear solves ----------------------------------------------------------------------
     def _refreshed(
-        self, solver: LaggedCholesky | AMGConjugateGradient | None, stage: str, free: np.ndarray
+        self,
+        solver: LaggedCholesky | AMGConjugateGradient | None,
+        stage: str,
+        free: np.ndarray,
+        background: bool = False,
     ) -> LaggedCholesky | AMGConjugateGradient:
         """Return a solver of the ``stage``'s matrix (``"u"``: a_j, ``"v"``: b_j) on ``free``.
 
         Call after rewriting the matrix values. A Cholesky factorisation is kept while the free
-        DOFs stay the same; the CG solver keeps its form and preconditioner per mesh.
+        DOFs stay the same; the CG solver keeps its form and preconditioner per mesh. A new
+        Cholesky solver is analysed and factorised in the ``background`` if asked.
         """
         operators = self._operators
         matrix = operators.a_matrix if stage == "u" else operators.b_matrix
@@ -373,7 +378,9 @@ class HalfStepSolvers:
             solver.values_changed(free)
             return solver
         if solver is None or not np.array_equal(free, solver.free):
-            return LaggedCholesky(matrix, free, self.max_cg, ordering=operators.ordering)
+            return LaggedCholesky(
+                matrix, free, self.max_cg, ordering=operators.ordering, background=background
+            )
         solver.values_changed()
         return solver
 

@@ -55,6 +55,8 @@ class LaggedCholesky:
         Relative residual reduction required from CG.
     ordering
         Fill-reducing ordering of the mesh's vertices (:func:`ngat.pardiso.sparse_inverse`).
+    background
+        Factorise in the background (:meth:`refresh`).
     """
 
     def __init__(
@@ -64,10 +66,11 @@ class LaggedCholesky:
         max_cg: int,
         tol: float = 1e-10,
         ordering: np.ndarray | None = None,
+        background: bool = False,
     ):
         self.matrix = matrix
         self.free = free.copy()
-        self.inverse = sparse_inverse(matrix, free, ordering=ordering)
+        self.inverse = sparse_inverse(matrix, free, ordering=ordering, background=background)
         self.max_cg = max_cg
         self._factored = self._values_to_keep()
         self.tol = tol

@@ -129,6 +129,8 @@ class Pardiso:
         Whether every phase runs on one thread with PARDISO's two-level factorisation
         (:data:`TWO_LEVEL`); default for positive definite matrices. Otherwise the phases run
         on MKL's threads (:class:`ngat.threads.FixedThreads`) with the classic algorithm.
+    background
+        Run the analysis in the background (sequential only; see :meth:`factorise`).
 
     Attributes
     ----------
@@ -143,6 +145,7 @@ class Pardiso:
         definite: bool,
         ordering: np.ndarray | None = None,
         sequential: bool | None = None,
+        background: bool = False,
     ) -> None:
         if not AVAILABLE:
             raise PardisoError("MKL PARDISO is not available: pip install mkl (x86-64 only)")
@@ -170,9 +173,9 @@ class Pardiso:
         self.ordering = np.zeros(self.n, dtype=np.int32)
         if ordering is not None:
             self.ordering[:] = ordering
-        self._pending: list[Future | None] = [None]  # a factorisation under way, if any
+        self._pending: list[Future] = []  # phases under way in the background, in order
         if self.n:
-            self._call(11)
+            self._run(11, background)
             # Released when the object goes, or at exit before the modules are torn down.
             weakref.finalize(self, _release, self._handle, self._mtype, self.iparm, self._pending)
 
@@ -194,16 +197,29 @@ class Pardiso:
         With ``background`` the factorisation runs in a worker thread (:func:`_worker`) and
         this returns at once: the caller computes on meanwhile, and the next call that needs
         the factors waits for them. PARDISO runs outside Python's global interpreter lock, so
-        the two overlap on two cores; the factors are the same to the last bit.
+        the two overlap on two cores; the factors are the same to the last bit. ``values``
+        must not change until then. Only a :attr:`sequential` factorisation runs in the
+        background (one on MKL's threads needs both cores).
         """
-        _wait(self._pending)
-        self._values[:] = values
         if not self.n:
             return
-        if background:
-            self._pending[0] = _worker().submit(self._call, 22)
+        if background and self._sequential:
+            self._pending.append(_worker().submit(self._factorise, values))
         else:
-            self._call(22)
+            _wait(self._pending)
+            self._factorise(values)
+
+    def _factorise(self, values: np.ndarray) -> None:
+        self._values[:] = values
+        self._call(22)
+
+    def _run(self, phase: int, background: bool) -> None:
+        """Run ``phase`` now, or after the phases under way in the background."""
+        if background and self._sequential:
+            self._pending.append(_worker().submit(self._call, phase))
+        else:
+            _wait(self._pending)
+            self._call(phase)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Return A⁻¹ ``rhs`` with the last factorisation."""
@@ -236,16 +252,13 @@ def wait_background() -> None:
         _worker().submit(int).result()
 
 
-def _wait(pending: list[Future | None]) -> None:
-    """Wait for the factorisation under way in ``pending`` (raising its error), if any."""
-    future, pending[0] = pending[0], None
-    if future is not None:
-        future.result()
+def _wait(pending: list[Future]) -> None:
+    """Wait for the phases under way in ``pending``, in order (raising their errors)."""
+    while pending:
+        pending.pop(0).result()
 
 
-def _release(
-    handle: np.ndarray, mtype: int, iparm: np.ndarray, pending: list[Future | None]
-) -> None:
+def _release(handle: np.ndarray, mtype: int, iparm: np.ndarray, pending: list[Future]) -> None:
     """Free PARDISO's memory of a factorisation once no phase of it is under way."""
     try:
         _wait(pending)
@@ -310,6 +323,7 @@ class PardisoInverse(BaseMatrix):
         free: np.ndarray,
         definite: bool = True,
         ordering: np.ndarray | None = None,
+        background: bool = False,
     ) -> None:
         super().__init__()
         self.matrix = matrix
@@ -321,8 +335,8 @@ class PardisoInverse(BaseMatrix):
             components = np.arange(matrix.height // len(ordering))
             ordering = number[(ordering[:, None] + len(ordering) * components).ravel()]
             ordering = ordering[ordering >= 0]
-        self.factor = Pardiso(indptr, indices, definite, ordering)
-        self.Update()
+        self.factor = Pardiso(indptr, indices, definite, ordering, background=background)
+        self.Update(background)
 
     def Update(self, background: bool = False) -> None:
         """Refactorise with the matrix's current values, in the ``background`` if asked.
@@ -407,16 +421,18 @@ def sparse_inverse(
     free: np.ndarray | None = None,
     definite: bool = True,
     ordering: np.ndarray | None = None,
+    background: bool = False,
 ):
     """Return A⁻¹ on the free DOFs: :class:`PardisoInverse` with MKL, else NGSolve's Cholesky.
 
     Both refactorise with ``Update()`` on the same graph and solve with ``inverse * x``.
     NGSolve's sparse Cholesky reads the entries on and below the diagonal as well and factorises
     indefinite matrices (L D Lᵀ) too, but counts no negative eigenvalues, and computes its own
-    ordering (``ordering`` is PARDISO's).
+    ordering (``ordering`` is PARDISO's). ``background``: PARDISO's analysis and factorisation
+    of a definite matrix run on while the caller computes (:meth:`Pardiso.factorise`).
     """
     if free is None:
         free = np.ones(matrix.height, dtype=bool)
     if AVAILABLE:
-        return PardisoInverse(matrix, free, definite, ordering)
+        return PardisoInverse(matrix, free, definite, ordering, background)
     return matrix.Inverse(BitArray(free), inverse="sparsecholesky")
