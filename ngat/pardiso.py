@@ -242,6 +242,10 @@ def _worker() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=1, thread_name_prefix="ngat-pardiso")
 
 
+# A forked child has none of its parent's threads: it makes a worker of its own.
+os.register_at_fork(after_in_child=_worker.cache_clear)
+
+
 def wait_background() -> None:
     """Wait until no factorisation runs in the background, before work on several threads.
 

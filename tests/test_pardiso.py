@@ -5,6 +5,8 @@ mesh; skipped where MKL is not installed (there ngat uses NGSolve's sparse Chole
 by the fallback test).
 """
 
+import multiprocessing
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -216,3 +218,19 @@ def test_a_definite_matrix_factorises_to_the_same_bits_whatever_mkls_threads():
     assert all(np.array_equal(s, solutions[0]) for s in solutions)
     residual = as_scipy(form.mat) @ solutions[0] - rhs
     assert np.abs(residual[free]).max() < 1e-8 * np.abs(rhs).max()
+
+
+def _factorise_in_background(matrix_and_free):
+    matrix, free = matrix_and_free
+    inverse = PardisoInverse(as_ngsolve(matrix), free, background=True)
+    return solve(inverse, as_ngsolve(matrix), np.ones(matrix.shape[0]))
+
+
+@needs_mkl
+def test_a_forked_process_factorises_in_the_background_of_its_own(p1):
+    """A child forked after the parent used its worker thread gets a worker of its own."""
+    stiffness, mass, free = p1
+    expected = _factorise_in_background((stiffness + mass, free))
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        result = pool.apply_async(_factorise_in_background, [(stiffness + mass, free)])
+        assert np.array_equal(result.get(timeout=10), expected)
