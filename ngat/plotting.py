@@ -34,7 +34,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pyvista
-from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
@@ -50,6 +49,7 @@ __all__ = [
     "offscreen_rendering_works",
     "energies_figure",
     "sweep_figure",
+    "draw_segments",
     "PlotError",
 ]
 
@@ -356,6 +356,41 @@ def default_zoom(
     return float(x), float(y), r
 
 
+MIN_LINEWIDTH, MAX_LINEWIDTH = 0.03, 0.4
+"""Line widths [pt] of the thinnest and the widest mesh edges (:func:`plot_mesh`)."""
+WIDTH_CLASSES = 16
+"""Line widths drawn, spaced geometrically between the thinnest and the widest."""
+
+
+def draw_segments(ax, segments: np.ndarray, linewidth: np.ndarray, color) -> None:
+    """Draw line segments (n, 2, 2) with per-segment widths, rounded to :data:`WIDTH_CLASSES`.
+
+    One polyline per width, its segments separated by NaN: a ``LineCollection`` makes a
+    ``Path`` per segment, 2.2 of the 3 s the pictures took at 137k elements.
+
+    Parameters
+    ----------
+    ax
+        Matplotlib axes.
+    segments
+        End points, shape (n, 2, 2).
+    linewidth
+        Width of each segment [pt], between :data:`MIN_LINEWIDTH` and :data:`MAX_LINEWIDTH`.
+    color
+        Matplotlib colour of every segment.
+    """
+    ratio = np.log(linewidth / MIN_LINEWIDTH) / np.log(MAX_LINEWIDTH / MIN_LINEWIDTH)
+    classes = np.rint(ratio * (WIDTH_CLASSES - 1)).astype(int)
+    for k in np.unique(classes):
+        chosen = segments[classes == k]
+        lines = np.full((len(chosen), 3, 2), np.nan)
+        lines[:, :2] = chosen
+        lines = lines.reshape(-1, 2)
+        share = k / (WIDTH_CLASSES - 1)
+        width = MIN_LINEWIDTH * (MAX_LINEWIDTH / MIN_LINEWIDTH) ** share
+        ax.plot(lines[:, 0], lines[:, 1], color=color, linewidth=width, solid_capstyle="butt")
+
+
 def plot_mesh(
     points: np.ndarray,
     triangles: np.ndarray,
@@ -405,9 +440,9 @@ def plot_mesh(
     # A line about a twentieth of its edge's length on paper: small elements show as hairlines
     # and leave the colour of v (or the white of the page) visible between them.
     length = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
-    linewidth = np.clip(20.0 * length / width, 0.03, 0.4)
+    linewidth = np.clip(20.0 * length / width, MIN_LINEWIDTH, MAX_LINEWIDTH)
     color = (1.0, 1.0, 1.0, 0.5) if v is not None else "black"
-    ax.add_collection(LineCollection(segments, colors=color, linewidths=linewidth))
+    draw_segments(ax, segments, linewidth, color)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")

@@ -97,3 +97,27 @@ def test_empty_folder_is_an_input_error(tmp_path):
     with pytest.raises(PlotError):
         plot_results(tmp_path)
     assert main(["plot", str(tmp_path / "nothing")]) == 2
+
+
+def test_mesh_edges_are_drawn_once_each_with_their_width_rounded_to_a_class():
+    from matplotlib.figure import Figure
+
+    from ngat.plotting import MAX_LINEWIDTH, MIN_LINEWIDTH, WIDTH_CLASSES, draw_segments
+
+    rng = np.random.default_rng(0)
+    segments = rng.random((500, 2, 2))
+    width = MIN_LINEWIDTH * (MAX_LINEWIDTH / MIN_LINEWIDTH) ** rng.random(500)
+    ax = Figure().subplots()
+    draw_segments(ax, segments, width, "black")
+    step = (MAX_LINEWIDTH / MIN_LINEWIDTH) ** (1 / (WIDTH_CLASSES - 1))
+    drawn = []
+    for line in ax.get_lines():
+        xy = line.get_xydata().reshape(-1, 3, 2)
+        assert np.isnan(xy[:, 2]).all()  # each segment on its own, between NaNs
+        for segment in xy[:, :2]:
+            index = np.flatnonzero((segments == segment).all(axis=(1, 2)))
+            assert len(index) == 1
+            assert step**-0.5 <= line.get_linewidth() / width[index[0]] <= step**0.5
+            drawn.append(index[0])
+    assert sorted(drawn) == list(range(500))
+    assert len(ax.get_lines()) <= WIDTH_CLASSES
