@@ -135,8 +135,7 @@ class HalfStepSolvers:
         self._v_residual = operators.b_matrix.CreateColVector()
         self._v_step = operators.b_matrix.CreateColVector()
         self._bound_active = 0
-        self._prepared: tuple | None = None
-        self._prepared_u: tuple | None = None
+        self._prepared: dict[str, tuple] = {}  # by prepare_u and prepare_v: mesh, inputs
 
     # -- u-step -----------------------------------------------------------------------------
     def solve_u(self, max_iterations: int = 50) -> None:
@@ -152,7 +151,7 @@ class HalfStepSolvers:
         """
         state, operators = self.state, self.operators
         u = state.u_values
-        prepared = self._prepared_u_for()
+        prepared = self._claim("u", state.v_values)
         for _ in range(max_iterations):
             tension = state.elasticity.tension(state.arrays, u)
             if not prepared:
@@ -191,15 +190,17 @@ class HalfStepSolvers:
         with state.timer("solve"):
             self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet, True)
             self._a_solver.refresh(background=True)
-        self._prepared_u = (state.arrays, state.v_values.copy())
+        self._prepared["u"] = (state.arrays, state.v_values.copy())
 
-    def _prepared_u_for(self) -> bool:
-        """Return whether :meth:`prepare_u` assembled a_j for this mesh and v; forget it."""
-        prepared, self._prepared_u = self._prepared_u, None
-        if prepared is None:
+    def _claim(self, stage: str, *inputs: np.ndarray) -> bool:
+        """Return whether the ``stage``'s matrix was prepared on this mesh from these inputs.
+
+        The preparation is forgotten either way: it serves one half-step at most.
+        """
+        prepared = self._prepared.pop(stage, None)
+        if prepared is None or prepared[0] is not self.state.arrays:
             return False
-        arrays, v = prepared
-        return arrays is self.state.arrays and np.array_equal(v, self.state.v_values)
+        return all(np.array_equal(a, b) for a, b in zip(prepared[1:], inputs, strict=True))
 
     def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
         """Move u along a semismooth Newton step; return whether the u-step has converged."""
@@ -244,7 +245,7 @@ class HalfStepSolvers:
         """
         state = self.state
         direct = self.linear_solver == "direct"
-        if not self._prepared_for(crack):
+        if not self._claim("v", state.u_values, crack):
             self._assemble_v(crack)
             with state.timer("solve"):
                 factorised = np.ones_like(crack) if direct else ~crack
@@ -273,20 +274,7 @@ class HalfStepSolvers:
         with self.state.timer("solve"):
             self._b_solver = self._refreshed(self._b_solver, "v", np.ones_like(crack), True)
             self._b_solver.refresh(background=True)
-        self._prepared = (self.state.arrays, self.state.u_values.copy(), crack.copy())
-
-    def _prepared_for(self, crack: np.ndarray) -> bool:
-        """Return whether :meth:`prepare_v` assembled b_j for this mesh, u and CR; forget it."""
-        prepared, self._prepared = self._prepared, None
-        if prepared is None:
-            return False
-        arrays, u, prepared_crack = prepared
-        state = self.state
-        return (
-            arrays is state.arrays
-            and np.array_equal(u, state.u_values)
-            and np.array_equal(prepared_crack, crack)
-        )
+        self._prepared["v"] = (self.state.arrays, self.state.u_values.copy(), crack.copy())
 
     def _assemble_v(self, crack: np.ndarray) -> None:
         """Write b_j(u)'s values; the direct solver's with CR decoupled (identity-like rows).
