@@ -31,6 +31,8 @@ from ngsolve.la import BaseMatrix, BaseVector, SparseMatrixd
 
 __all__ = [
     "AVAILABLE",
+    "MKL_CBWR_AUTO",
+    "TWO_LEVEL",
     "Pardiso",
     "PardisoError",
     "PardisoInverse",
@@ -198,8 +200,8 @@ class Pardiso:
         this returns at once: the caller computes on meanwhile, and the next call that needs
         the factors waits for them. PARDISO runs outside Python's global interpreter lock, so
         the two overlap on two cores; the factors are the same to the last bit. ``values``
-        must not change until then. Only a :attr:`sequential` factorisation runs in the
-        background (one on MKL's threads needs both cores).
+        must not change until then. Only a sequential factorisation (the class's
+        ``sequential``) runs in the background: one on MKL's threads needs both cores.
         """
         if not self.n:
             return
