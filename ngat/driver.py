@@ -46,6 +46,7 @@ from ngat.minimization import (
     alternating_minimization,
     estimate,
     predict_v,
+    predicted_v,
 )
 from ngat.output import OutputError, ResultsWriter, vtu_name
 from ngat.parameters import Parameters
@@ -133,6 +134,34 @@ def tip_remesher(scene: Scene, parameters: Parameters) -> TipRemesher | None:
     if adaptivity.adapt != "band" or adaptivity.remesh_radius == 0 or not scene.slits:
         return None
     return TipRemesher(parameters.model.eps, scene.slits, adaptivity.remesh_radius)
+
+
+def prepare_next_step(
+    state: ATState,
+    half_steps: HalfStepSolvers,
+    predictor: bool,
+    times: np.ndarray,
+    k: int,
+) -> None:
+    """Start factorising the first a_j of load step ``k`` as soon as step k − 1 has converged.
+
+    Step k's alternating minimisation starts from v(t_{k−1}), or from its prediction
+    (:func:`ngat.minimization.predicted_v`), with v = 0 on CR(t_k): known once v(t_{k−1}) is, so
+    its a_j factorises in the background (:meth:`ngat.halfsteps.HalfStepSolvers.prepare_u`)
+    while step k − 1's estimators, measures, fields and checkpoint are computed and written.
+    A refinement at the start of step k makes it a waste of the idle core, never a wrong
+    number. Call before ``state.v_prev`` becomes v(t_{k−1}).
+    """
+    v = state.v_values
+    pointwise = state.model.irreversibility == "pointwise"
+    predicted = None
+    if predictor and k >= 2:
+        ratio = (times[k] - times[k - 1]) / (times[k - 1] - times[k - 2])
+        change = v - state.v_prev.vec.FV().NumPy()
+        predicted = predicted_v(v, change, ratio, v if pointwise else 1.0)
+    start = v.copy() if predicted is None else predicted
+    start[state.crack_set(previous=v)] = 0.0
+    half_steps.prepare_u(start)
 
 
 def run(
@@ -274,6 +303,8 @@ def _run_locked(
                 raise
             crack = state.crack_set()
             forces = half_steps.operators.reaction_forces()
+            if k + 1 < len(times):
+                prepare_next_step(state, half_steps, solver.predictor, times, k + 1)
             record = {"step": k, "t": float(t), **state.energies(), **forces}
             record.update(
                 am_iterations=step.iterations,

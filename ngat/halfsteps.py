@@ -171,13 +171,14 @@ class HalfStepSolvers:
                 return
         log.warning("split u-step: not converged after %d Newton iterations", max_iterations)
 
-    def prepare_u(self) -> None:
+    def prepare_u(self, v: np.ndarray | None = None) -> None:
         """Assemble the next u-step's a_j(v) and start factorising it; return at once.
 
         As :meth:`prepare_v`: the factorisation runs on while the caller computes ν, the crack
         band and the energies of the v-step just solved, and :meth:`solve_u` on the same mesh
-        and v uses it, in the next load step too. Without an energy split only (with one, a_j
-        depends on u's pattern).
+        and v uses it. ``v``: the v the next u-step will start from if not the current one (the
+        next load step's prediction, prepared while the driver writes this step's results).
+        Without an energy split only (with one, a_j depends on u's pattern).
         """
         state = self.state
         if (
@@ -185,12 +186,13 @@ class HalfStepSolvers:
             or state.elasticity.tension(state.arrays, state.u_values) is not None
         ):
             return
+        v = state.v_values if v is None else v
         with state.timer("assembly"):
-            self.operators.assemble_a()
+            self.operators.assemble_a(v)
         with state.timer("solve"):
             self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet, True)
             self._a_solver.refresh(background=True)
-        self._prepared["u"] = (state.arrays, state.v_values.copy())
+        self._prepared["u"] = (state.arrays, v.copy())
 
     def _claim(self, stage: str, *inputs: np.ndarray) -> bool:
         """Return whether the ``stage``'s matrix was prepared on this mesh from these inputs.

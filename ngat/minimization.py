@@ -51,6 +51,7 @@ __all__ = [
     "iteration_limit",
     "load_bearing_change",
     "predict_v",
+    "predicted_v",
     "PREDICTOR_MAX",
     "tolerance",
 ]
@@ -317,8 +318,10 @@ that grew or jumped, not a trend to follow. On the paper's example (Δt = 0.01) 
 0.003–0.02 per step up to t = 1.25, 0.03–0.11 once the cracks leave their slits."""
 
 
-def predict_v(state: ATState, ratio: float) -> bool:
-    """Start the load step from v(t_{k−1}) + ratio · (v(t_{k−1}) − v(t_{k−2})); return whether.
+def predicted_v(
+    v: np.ndarray, change: np.ndarray, ratio: float, upper: np.ndarray | float = 1.0
+) -> np.ndarray | None:
+    """Return v(t_{k−1}) + ratio · (v(t_{k−1}) − v(t_{k−2})), clipped; ``None`` if no prediction.
 
     Alternating minimisation (Algorithm 1) starts from v(t_{k−1}); while v follows the load
     smoothly, its linear extrapolation is O(Δt²) from the step's solution instead of O(Δt), and
@@ -326,24 +329,36 @@ def predict_v(state: ATState, ratio: float) -> bool:
     example: its 139 steps before the break in 500 linear solves instead of 848, fracture time
     and E(1.0) unchanged). The prediction is clipped to the admissible set (0 ≤ v ≤ 1,
     or ≤ v(t_{k−1}) with pointwise irreversibility); v = 0 on CR(t_k) is set by the loop.
-    Nothing is done after a step whose change exceeded :data:`PREDICTOR_MAX`.
+    There is none after a step whose change exceeded :data:`PREDICTOR_MAX`.
 
     Parameters
     ----------
-    state
-        Fields on the current mesh: ``v`` = ``v_prev`` = v(t_{k−1}) and ``v_change`` =
-        v(t_{k−1}) − v(t_{k−2}), prolongated with them.
+    v, change
+        Nodal values of v(t_{k−1}) and of v(t_{k−1}) − v(t_{k−2}).
     ratio
         (t_k − t_{k−1}) / (t_{k−1} − t_{k−2}).
+    upper
+        The upper bound of v: 1, or v(t_{k−1}) with pointwise irreversibility.
     """
-    change = state.v_change.vec.FV().NumPy()
     largest = float(np.abs(change).max()) if len(change) else 0.0
     if largest == 0.0 or largest > PREDICTOR_MAX:
-        return False
+        return None
+    predicted = v + ratio * change
+    np.clip(predicted, 0.0, upper, out=predicted)
+    return predicted
+
+
+def predict_v(state: ATState, ratio: float) -> bool:
+    """Start the load step from :func:`predicted_v`; return whether there was a prediction.
+
+    ``state`` holds ``v`` = ``v_prev`` = v(t_{k−1}) and ``v_change`` = v(t_{k−1}) − v(t_{k−2})
+    on the current mesh, prolongated with them.
+    """
     upper = state.v_prev.vec.FV().NumPy() if state.model.irreversibility == "pointwise" else 1.0
-    v = state.v_values
-    v += ratio * change
-    np.clip(v, 0.0, upper, out=v)
+    v = predicted_v(state.v_values, state.v_change.vec.FV().NumPy(), ratio, upper)
+    if v is None:
+        return False
+    state.v_values[:] = v
     return True
 
 

@@ -78,20 +78,20 @@ class LumpedOperators:
         """The vertices' fill-reducing ordering (see the class's attributes)."""
         return pardiso.vertex_ordering(self.b_matrix) if pardiso.AVAILABLE else None
 
-    def u_matrix_values(self) -> np.ndarray:
-        """Return the values of a_j(v; ·, ·) at the current v (and u, with an energy split).
+    def u_matrix_values(self, v: np.ndarray | None = None) -> np.ndarray:
+        """Return the values of a_j(v; ·, ·) at the current v, or ``v`` (and u, with a split).
 
         Each element contributes c_T K_T, c_T = ∫_T P_j(v²)/|T| + η; with an energy split, the
         weights of its parts follow the sign of tr ε(u) on T (:mod:`ngat.elasticity`).
         """
         state = self.state
-        c = state.functional.coefficient(self.arrays, state.v_values)
+        c = state.functional.coefficient(self.arrays, state.v_values if v is None else v)
         weights = state.functional.u_step_weights(self.arrays, state.u_values, c)
         return self.assembler.weighted_values(weights, self.stiffness_parts)
 
-    def assemble_a(self) -> None:
-        """Write a_j(v; ·, ·) at the current fields into ``a_matrix``, in place."""
-        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values()
+    def assemble_a(self, v: np.ndarray | None = None) -> None:
+        """Write a_j(v; ·, ·) at the current fields (or at ``v``) into ``a_matrix``, in place."""
+        self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values(v)
 
     def assemble_b(self, crack: np.ndarray | None = None) -> None:
         """Write b_j(u; ·, ·) at the current u into ``b_matrix``, in place.

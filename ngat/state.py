@@ -279,16 +279,18 @@ class ATState:
         """Nodal values of v (a writable view)."""
         return self.v.vec.FV().NumPy()
 
-    def crack_set(self) -> np.ndarray:
+    def crack_set(self, previous: np.ndarray | None = None) -> np.ndarray:
         """Return the DOFs where v = 0 is imposed: CR(t_k) and the scene's crack.
 
         With ``irreversibility="crtol"`` CR(t_k) = {v(t_{k-1}) < CRTOL} (paper, Section 1.2);
         with ``"pointwise"`` irreversibility is the bound v ≤ v(t_{k−1}) of eq. (3) instead
         (:meth:`ngat.halfsteps.HalfStepSolvers.solve_v`) and only the scene's crack is fixed.
+        ``previous``: the nodal values of v(t_{k−1}) if not ``v_prev``'s (the next step's CR).
         """
         if self.model.irreversibility == "pointwise":
             return self.initial_crack.copy()
-        return (self.v_prev.vec.FV().NumPy() < self.model.crtol) | self.initial_crack
+        previous = self.v_prev.vec.FV().NumPy() if previous is None else previous
+        return (previous < self.model.crtol) | self.initial_crack
 
     # -- load -------------------------------------------------------------------------------
     def apply_load(self, t: float) -> None:

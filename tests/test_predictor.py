@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
+from ngat import driver
 from ngat.driver import run
+from ngat.halfsteps import HalfStepSolvers
 from ngat.minimization import PREDICTOR_MAX, predict_v
 from ngat.parameters import ModelParameters
 from ngat.scene import load_scene
@@ -73,3 +75,41 @@ def test_predicted_steps_end_where_the_paper_start_ends_in_fewer_solves(tmp_path
     assert solves[True] < 0.7 * solves[False], solves
     for ours, theirs in zip(runs[True], runs[False], strict=True):
         assert ours["total"] == pytest.approx(theirs["total"], rel=1e-4, abs=1e-12)
+
+
+def test_the_next_steps_start_prepared_in_the_background_changes_no_bit(tmp_path, monkeypatch):
+    # The driver factorises a_j at the next step's (predicted) start while it writes a step;
+    # each step's first u-step claims that factorisation, and every number is as without it.
+    scene = load_scene("two-slits")
+    times = np.round(np.arange(0.0, 0.41, 0.04), 10)
+    parameters, _ = scene.configure(
+        overrides={"eps": 0.2, "maxh": 0.25, "adapt": "fixed", "resolve_eps": False}
+    )
+    claims = []
+    claim = HalfStepSolvers._claim
+
+    def counted(self, stage, *inputs):
+        claimed = claim(self, stage, *inputs)
+        claims.append((stage, claimed))
+        return claimed
+
+    def step(*args, **kwargs):
+        claims.append(("start", False))
+        return minimize(*args, **kwargs)
+
+    minimize = driver.alternating_minimization
+    monkeypatch.setattr(HalfStepSolvers, "_claim", counted)
+    monkeypatch.setattr(driver, "alternating_minimization", step)
+    prepared = run(scene, parameters, times, tmp_path / "prepared").records
+    first_u = [
+        next(claimed for stage, claimed in claims[i + 1 :] if stage == "u")
+        for i, (stage, _) in enumerate(claims)
+        if stage == "start"
+    ]
+    monkeypatch.setattr(driver, "prepare_next_step", lambda *args: None)
+    plain = run(scene, parameters, times, tmp_path / "plain").records
+    # Every step after the first starts from the prepared factorisation.
+    assert first_u == [False] + [True] * (len(times) - 1)
+    for ours, theirs in zip(prepared, plain, strict=True):
+        for key in ("bulk", "surface", "total", "force", "mu", "nu", "linear_solves"):
+            assert ours[key] == theirs[key], key
