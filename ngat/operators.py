@@ -49,8 +49,9 @@ class LumpedOperators:
         The mesh arrays the operators were built on.
     ordering
         A fill-reducing ordering of the mesh's vertices shared by every sparse factorisation
-        on it (a_j, b_j, Newton's Hessian; :func:`ngat.pardiso.vertex_ordering`), computed at
-        the first use; ``None`` where NGSolve's sparse Cholesky computes its own.
+        on it (a_j, b_j, Newton's Hessian; :func:`ngat.pardiso.vertex_ordering`), computed in
+        the background from the moment the operators exist (the first use waits for it);
+        ``None`` where NGSolve's sparse Cholesky computes its own.
     """
 
     def __init__(self, state: ATState):
@@ -60,23 +61,29 @@ class LumpedOperators:
         with state.timer("assembly"):
             # The graphs come from the edges (b_j's is a_j's when u is scalar), the values from
             # the vectorised assemblers (equal to a_form and b_form, tests/test_forms.py).
-            self.a_matrix = graph_matrix(arrays, density.components)
+            self.b_matrix = graph_matrix(arrays)
+            # METIS orders the new mesh in the background while the set-up goes on.
+            self._ordering = (
+                pardiso.background_vertex_ordering(self.b_matrix) if pardiso.AVAILABLE else None
+            )
+            if density.components == 1:
+                self.a_matrix = self.b_matrix.CreateMatrix()
+            else:
+                self.a_matrix = graph_matrix(arrays, density.components)
             self.assembler = LumpedAssembler(
                 arrays, self.a_matrix, model.lumping,
                 density.components, density.element_stiffness(arrays),
             )  # fmt: skip
             self.stiffness_parts = density.parts(arrays)
             if density.components == 1:
-                self.b_matrix = self.a_matrix.CreateMatrix()
                 self.b_assembler = self.assembler
             else:
-                self.b_matrix = graph_matrix(arrays)
                 self.b_assembler = LumpedAssembler(arrays, self.b_matrix, model.lumping)
 
-    @functools.cached_property
+    @property
     def ordering(self) -> np.ndarray | None:
         """The vertices' fill-reducing ordering (see the class's attributes)."""
-        return pardiso.vertex_ordering(self.b_matrix) if pardiso.AVAILABLE else None
+        return self._ordering.result() if self._ordering else None
 
     def u_matrix_values(self, v: np.ndarray | None = None) -> np.ndarray:
         """Return the values of a_j(v; ·, ·) at the current v, or ``v`` (and u, with a split).
