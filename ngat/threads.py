@@ -11,12 +11,12 @@ duration of a run (threadpoolctl for the BLAS and OpenMP libraries loaded in the
 reports them for ``summary.json``. One thread each is also the fastest on two cores
 (``README.md``).
 
-MKL PARDISO's factorisations of indefinite matrices (Newton's Hessian) and METIS's orderings
-are the exception: with MKL's conditional numerical reproducibility on
-(:data:`ngat.pardiso.MKL_CBWR_AUTO`) they gave the same bits with one thread and with two in
-every comparison made (``tests/test_pardiso.py``, and the quick two-slits run's
-``energies.csv``), and two threads are faster on the example's meshes (the half-steps'
-definite matrices factorise on one thread whatever the count: :data:`ngat.pardiso.TWO_LEVEL`).
+MKL PARDISO's factorisations of indefinite matrices (Newton's Hessian) are the exception:
+with MKL's conditional numerical reproducibility on (:data:`ngat.pardiso.MKL_CBWR_AUTO`) they
+gave the same bits with one thread and with two in every comparison made
+(``tests/test_pardiso.py``, and the quick two-slits run's ``energies.csv``), and two threads
+are faster on the example's meshes (the half-steps' definite matrices and METIS's orderings
+run on one thread whatever the count: :data:`ngat.pardiso.TWO_LEVEL`).
 MKL therefore gets :func:`factorisation_threads`, the cores the process may use unless
 ``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :func:`oversubscription`
 warns when other work keeps those cores busy. Between factorisations their OpenMP threads
