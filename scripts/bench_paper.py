@@ -18,7 +18,9 @@ break step, of it and after it) and ``phases.png``; the run's results folder in 
 
 Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
 (removed at the end, also on an error or Ctrl-C) and runs the benchmark ``--repeats`` times
-(default 3) for each checkout, alternating current/REV so that machine noise hits both alike.
+(default 3) for each checkout, alternating current/REV so that machine noise hits both alike,
+current first in odd pairs and second in even ones (the second run of a pair tended to be the
+faster).
 Each run is this script's one-run mode in a process of its own with ``PYTHONPATH`` set to the
 checkout's root: the two versions never share a process and are measured by the same code,
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
@@ -26,8 +28,9 @@ an older revision cannot give is reported as "–". Output in ``--out``: ``compa
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max), the share
 of the wall time per phase ("–" where a checkout does not time a phase), the median walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
-of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, and the ratio
-current/REV of the median wall times.
+of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
+current/REV of the median wall times and that of each pair (less sensitive to the machine's
+drift from one pair to the next).
 """
 
 from __future__ import annotations
@@ -303,11 +306,13 @@ def table(comparison: dict) -> str:
     mode = " ".join(["two-slits", *comparison["variant"]])
     return "\n".join(
         [
-            f"{mode}, {comparison['repeats']} run(s) per checkout, alternating.",
+            f"{mode}, {comparison['repeats']} run(s) per checkout, alternating (current first "
+            "in odd pairs, second in even ones).",
             "",
             *lines,
             "",
             f"Median wall time current / {comparison['against']}: {comparison['wall_ratio']:.3f}",
+            "Pair by pair: " + ", ".join(f"{r:.3f}" for r in comparison["pair_ratios"]),
         ]
     )
 
@@ -325,8 +330,10 @@ def compare(revision: str, repeats: int, words: list[str], out: Path) -> None:
     with worktree(revision) as checkout:
         roots = {"current": ROOT, "against": checkout}
         for k in range(repeats):
-            for name, root in roots.items():
-                runs[name].append(bench_child(root, words))
+            # ABBA: the order flips from pair to pair, since the second run of a pair was
+            # faster on our machines whatever the code (by up to 1 s in 14).
+            for name in ("current", "against")[:: 1 if k % 2 == 0 else -1]:
+                runs[name].append(bench_child(roots[name], words))
                 print(f"run {k + 1}/{repeats} {labels[name]}: {runs[name][-1]['wall_s']} s")
     phases = timed_phases(runs)
     summary = {name: summarise(benches, phases) for name, benches in runs.items()}
@@ -340,6 +347,10 @@ def compare(revision: str, repeats: int, words: list[str], out: Path) -> None:
         "wall_ratio": round(
             summary["current"]["wall_median_s"] / summary["against"]["wall_median_s"], 3
         ),
+        "pair_ratios": [
+            round(c["wall_s"] / a["wall_s"], 3)
+            for c, a in zip(runs["current"], runs["against"], strict=True)
+        ],
         "runs": runs,
     }
     markdown = table(comparison)

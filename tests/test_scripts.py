@@ -100,6 +100,9 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert markdown.startswith("two-slits --quick --until 1.35,")
     assert "| fracture time |" in markdown
     assert "| break step, median [s] | – | – |" in markdown
+    ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
+    assert comparison["pair_ratios"] == [round(ratio, 3)]
+    assert f"Pair by pair: {ratio:.3f}" in markdown
 
 
 def test_stability_judges_the_broken_body_against_the_reference():
