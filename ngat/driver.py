@@ -136,6 +136,11 @@ def tip_remesher(scene: Scene, parameters: Parameters) -> TipRemesher | None:
     return TipRemesher(parameters.model.eps, scene.slits, adaptivity.remesh_radius)
 
 
+def step_ratio(times: np.ndarray, k: int) -> float:
+    """Return (t_k − t_{k−1}) / (t_{k−1} − t_{k−2}), the predictor's ratio (k ≥ 2)."""
+    return float((times[k] - times[k - 1]) / (times[k - 1] - times[k - 2]))
+
+
 def prepare_next_step(
     state: ATState,
     half_steps: HalfStepSolvers,
@@ -156,9 +161,8 @@ def prepare_next_step(
     pointwise = state.model.irreversibility == "pointwise"
     predicted = None
     if predictor and k >= 2:
-        ratio = (times[k] - times[k - 1]) / (times[k - 1] - times[k - 2])
         change = v - state.v_prev.vec.FV().NumPy()
-        predicted = predicted_v(v, change, ratio, v if pointwise else 1.0)
+        predicted = predicted_v(v, change, step_ratio(times, k), v if pointwise else 1.0)
     start = v.copy() if predicted is None else predicted
     start[state.crack_set(previous=v)] = 0.0
     half_steps.prepare_u(start)
@@ -286,7 +290,7 @@ def _run_locked(
             remeshed = remesher.remesh(state) if remesher else 0
             predicted = band.refine(state) if band else 0
             if solver.predictor and k >= 2:
-                predict_v(state, (t - times[k - 1]) / (times[k - 1] - times[k - 2]))
+                predict_v(state, step_ratio(times, k))
             try:
                 step = alternating_minimization(
                     state,
