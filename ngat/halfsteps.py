@@ -128,7 +128,7 @@ class HalfStepSolvers:
             return
         self._arrays = state.arrays
         self._operators = operators = LumpedOperators(state)
-        _ = state.edges  # the estimators' edge topology, built while METIS orders the vertices
+        state.start_edges()  # the estimators' edge topology, in the background after METIS
         self._a_solver: LaggedCholesky | AMGConjugateGradient | None = None
         self._b_solver: LaggedCholesky | AMGConjugateGradient | None = None
         self._residual = operators.a_matrix.CreateColVector()

@@ -21,8 +21,10 @@ import ctypes
 import importlib.metadata
 import os
 import weakref
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from functools import cache
+from typing import Any, TypeVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,6 +37,7 @@ __all__ = [
     "TWO_LEVEL",
     "Pardiso",
     "background_vertex_ordering",
+    "in_background",
     "PardisoError",
     "PardisoInverse",
     "sparse_inverse",
@@ -80,6 +83,8 @@ numeric factorisation 7.7 / 23 / 52 ms against 7.4 / 22 / 44 ms, back-substituti
 6.3 ms against 4.9 / 11.5 / 24 ms. On two threads it is not repeatable to the last bit, and
 for symmetric indefinite matrices it reports no inertia (``iparm[22]`` stays 0), so Newton's
 Hessian keeps the classic algorithm on MKL's threads."""
+
+T = TypeVar("T")
 
 _INT = ctypes.POINTER(ctypes.c_int32)
 if _MKL is not None:
@@ -247,6 +252,15 @@ def _worker() -> ThreadPoolExecutor:
 
 # A forked child has none of its parent's threads: it makes a worker of its own.
 os.register_at_fork(after_in_child=_worker.cache_clear)
+
+
+def in_background(function: Callable[..., T], *args: Any) -> Future:
+    """Run ``function(*args)`` in the worker thread after the phases under way; return its future.
+
+    For numpy work of a new mesh that the worker can take while the main thread builds the
+    rest (numpy releases Python's lock in its loops).
+    """
+    return _worker().submit(function, *args)
 
 
 def wait_background() -> None:

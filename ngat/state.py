@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Hashable, Mapping
+from concurrent.futures import Future
 from typing import TypeVar
 
 import ngsolve
@@ -24,6 +25,7 @@ from ngat.estimators import EdgeTopology
 from ngat.forms import MeshArrays
 from ngat.functional import LumpedFunctional
 from ngat.parameters import ModelParameters
+from ngat.pardiso import in_background
 from ngat.timing import PhaseTimer
 
 __all__ = ["ATState", "SceneError"]
@@ -240,7 +242,17 @@ class ATState:
         """Edge topology of the mesh for the estimators, built on first use per mesh."""
         if self._edges is None:
             self._edges = EdgeTopology(self.arrays)
+        elif isinstance(self._edges, Future):
+            self._edges = self._edges.result()
         return self._edges
+
+    def start_edges(self) -> None:
+        """Start building :attr:`edges` in the background (:func:`ngat.pardiso.in_background`).
+
+        A new mesh's operators are built meanwhile; the first use waits for it.
+        """
+        if self._edges is None:
+            self._edges = in_background(EdgeTopology, self.arrays)
 
     def of_v(self, key: Hashable, compute: Callable[[], T]) -> T:
         """Return ``compute()``, computed once per mesh and nodal values of v.

@@ -67,6 +67,20 @@ def test_edge_topology_of_a_slit_mesh():
     np.testing.assert_allclose(np.linalg.norm(edges.normal, axis=1), 1, rtol=1e-14)
 
 
+def test_the_edge_topology_built_in_the_background_is_the_same():
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure()
+    state = ATState(scene.make_mesh(0.1), parameters.model, scene.loads, scene.crack)
+    state.start_edges()  # as a new mesh's solvers do (HalfStepSolvers)
+    built = state.edges
+    assert state.edges is built  # waited for once, then kept
+    direct = EdgeTopology(state.arrays)
+    jump, expected = built.normal_flux_jump, direct.normal_flux_jump
+    u = np.sin(3 * state.arrays.coords[:, 0]) * state.arrays.coords[:, 1]
+    assert np.array_equal(jump(u), expected(u))
+    assert np.array_equal(built.elements, direct.elements)
+
+
 def test_patch_linear_u_has_flux_only_on_slit_faces():
     """u = x, v ≡ 1: no jumps, no element residual; ∂_n u = ±1 on the vertical slit faces only."""
     mesh = load_scene("two-slits").make_mesh(0.5)
