@@ -183,7 +183,7 @@ class Pardiso:
             self.ordering[:] = ordering
         self._pending: list[Future] = []  # phases under way in the background, in order
         if self.n:
-            self._run(11, background)
+            self._run(background, self._call, 11)
             # Released when the object goes, or at exit before the modules are torn down.
             weakref.finalize(self, _release, self._handle, self._mtype, self.iparm, self._pending)
 
@@ -209,25 +209,20 @@ class Pardiso:
         must not change until then. Only a sequential factorisation (the class's
         ``sequential``) runs in the background: one on MKL's threads needs both cores.
         """
-        if not self.n:
-            return
-        if background and self._sequential:
-            self._pending.append(_worker().submit(self._factorise, values))
-        else:
-            _wait(self._pending)
-            self._factorise(values)
+        if self.n:
+            self._run(background, self._factorise, values)
 
     def _factorise(self, values: np.ndarray) -> None:
         self._values[:] = values
         self._call(22)
 
-    def _run(self, phase: int, background: bool) -> None:
-        """Run ``phase`` now, or after the phases under way in the background."""
+    def _run(self, background: bool, function: Callable[..., None], *args: Any) -> None:
+        """Run ``function(*args)`` now, or in the background after the phases under way there."""
         if background and self._sequential:
-            self._pending.append(_worker().submit(self._call, phase))
+            self._pending.append(in_background(function, *args))
         else:
             _wait(self._pending)
-            self._call(phase)
+            function(*args)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Return A⁻¹ ``rhs`` with the last factorisation."""
@@ -447,7 +442,7 @@ def background_vertex_ordering(matrix: SparseMatrixd) -> Future:
     goes on while METIS orders its vertices.
     """
     _, indptr, indices = _upper_triangle(matrix, np.arange(matrix.height))
-    return _worker().submit(_ordering, indptr, indices)
+    return in_background(_ordering, indptr, indices)
 
 
 def _ordering(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
