@@ -62,9 +62,9 @@ HalfStepMonitor = Callable[[str, ATState], None]
 
 ROUND_OFF_TOL = 1e-6
 """Smallest TOL of the relative form: estimators of fields that are round-off are not refined."""
-CRACKED = 0.1
+CRACKED = 0.25
 """v below which a vertex is crack for the stopping test ``am_stop="contraction"``: its
-stiffness v² is below 1 % (:func:`load_bearing_change`)."""
+stiffness v² is below 1/16 (:func:`load_bearing_change`)."""
 PROGRESS_EVERY = 50
 """Iterations between the progress lines of one load step (log level INFO): a step in which a
 crack runs through the body can take hundreds of iterations and tens of minutes, and a log or
@@ -281,12 +281,16 @@ def load_bearing_change(v: np.ndarray, v_old: np.ndarray) -> float:
 
     v̄ = (v + v_old)/2.
 
-    Where v̄ ≥ :data:`CRACKED` this is the change itself; inside a crack (stiffness v² < 1 %) it
-    is scaled down with v̄. As a crack opens, the jump of u across its band grows and v in the
-    band drifts towards 0, by about 1e−3 per iteration at v ≈ 0.005 and with a contraction
+    Where v̄ ≥ :data:`CRACKED` this is the change itself; inside a crack (stiffness v² < 1/16)
+    it is scaled down with v̄. As a crack opens, the jump of u across its band grows and v in
+    the band drifts towards 0, by about 1e−3 per iteration at v ≈ 0.005 and with a contraction
     rate near 1, while I_j moves by 1e−5 of itself (measured on the paper's example after the
-    body broke, t = 1.5: 29 iterations and 32 s with ‖Δv‖_∞, 1 with this). A crack front
-    creeping through intact material is measured in full.
+    body broke, t = 1.5: 29 iterations and 32 s with ‖Δv‖_∞, 1 with this). The crack's flanks
+    settle the same way once a crack has run: in the paper's example's break step the last 17
+    iterations moved v by up to 1e−3 per iteration only at v = 0.05–0.1, and I_j by less than
+    1e−5 of itself (132 instead of 149 iterations with the threshold at 0.25 instead of 0.1,
+    the final I_j 4e−5 higher). A crack front creeping through intact material is measured in
+    full.
 
     Parameters
     ----------

@@ -234,11 +234,12 @@ def test_contraction_test_does_not_stop_a_creeping_iteration_early(tmp_path):
 def test_load_bearing_change_is_the_change_outside_the_crack():
     v_old = np.array([1.0, 0.6, 0.1, 0.006, 0.0])
     v = np.array([0.999, 0.59, 0.09, 0.005, 0.0])
-    # Full weight down to v̄ = CRACKED, then v̄ / CRACKED: at v̄ = 0.0055 the 1e-3 counts 5.5e-5.
+    # Full weight down to v̄ = CRACKED = 1/4, then v̄ / CRACKED: at v̄ = 0.0055 the 1e-3 counts
+    # 2.2e-5.
     weights = np.minimum(1.0, (v + v_old) / 2 / CRACKED)
-    np.testing.assert_allclose(weights, [1.0, 1.0, 0.95, 0.055, 0.0])
+    np.testing.assert_allclose(weights, [1.0, 1.0, 0.38, 0.022, 0.0])
     assert load_bearing_change(v[:2], v_old[:2]) == pytest.approx(0.01)
-    assert load_bearing_change(v[3:], v_old[3:]) == pytest.approx(5.5e-5)
+    assert load_bearing_change(v[3:], v_old[3:]) == pytest.approx(2.2e-5)
     assert load_bearing_change(v, v_old) == pytest.approx(0.01)
 
 
