@@ -1,7 +1,8 @@
 """Benchmark: the paper's example end to end, where the time goes, and against another revision.
 
 Question: how long does ``ngat run two-slits`` (the paper's Section 3 example, 161 load steps,
-docs/design.md scene 1) take on this machine, how is the wall time split between assembly,
+docs/design.md scene 1) take on this machine, the load history and the pictures the command
+draws at its end, how is the wall time split between assembly,
 linear solves, estimation, refinement and output, how much memory does it need, and how many
 alternating-minimisation iterations does it spend, in total and in the growth phase? And is
 the current tree faster or slower than a given git revision, measured side by side?
@@ -11,7 +12,8 @@ peak memory ≤ 2 GB.
 
 One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's quick variant);
 ``--until T`` stops the load history at t = T (e.g. 1.35: the pre-break steps alone);
-output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time, seconds per
+output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time of the load
+history and of the pictures (``ngat.experiment.draw_pictures``), seconds per
 timed phase, peak memory, AM iterations in total and in the growth window, linear solves,
 fracture time, E(1.0), final elements, element sizes, the wall of the steps before the
 break step, of it and after it) and ``phases.png``; the run's results folder in ``run/``.
@@ -25,7 +27,8 @@ Each run is this script's one-run mode in a process of its own with ``PYTHONPATH
 checkout's root: the two versions never share a process and are measured by the same code,
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
-printed) and ``compare.json`` with, per checkout, the wall time (median, min, max), the share
+printed) and ``compare.json`` with, per checkout, the wall time (median, min, max) of the load
+history and with the pictures, the share
 of the wall time per phase ("–" where a checkout does not time a phase), the median walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
@@ -112,6 +115,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     begin = time.perf_counter()
     result = run(scene, parameters, times, folder)
     wall = time.perf_counter() - begin
+    pictures = optional(lambda: timed_pictures(folder, scene))
     records, summary = result.records, result.summary
     timing = summary.get("timing", {})
     onset = optional(lambda: growth_onset(records))
@@ -119,6 +123,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     end = fracture if fracture is not None else float("inf")
     return {
         "wall_s": round(wall, 2),
+        "pictures_s": pictures,
         "phases_s": {phase: seconds for phase, seconds in timing.items() if phase != "wall"},
         "solve_fraction": optional(lambda: round(timing["solve"] / timing["wall"], 3)),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
@@ -137,6 +142,21 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
         "steps": len(records),
         "ngat": str(Path(ngat.__file__).resolve().parent),
     }
+
+
+def timed_pictures(folder: Path, scene) -> float | None:
+    """Return the seconds ``ngat run`` spends drawing a finished run's pictures at its end.
+
+    ``None`` for a revision without :func:`ngat.experiment.draw_pictures`.
+    """
+    try:
+        from ngat.experiment import draw_pictures
+    except ImportError:
+        return None
+
+    begin = time.perf_counter()
+    draw_pictures(folder, scene.slits)
+    return round(time.perf_counter() - begin, 2)
 
 
 def plot_phases(bench: dict, title: str, path: Path) -> None:
@@ -231,6 +251,9 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
         "wall_median_s": round(statistics.median(walls), 2),
         "wall_min_s": min(walls),
         "wall_max_s": max(walls),
+        "with_pictures_median_s": optional(
+            lambda: round(statistics.median(b["wall_s"] + b["pictures_s"] for b in benches), 2)
+        ),
         "phase_share": {
             p: round(statistics.median(b["phases_s"][p] / b["wall_s"] for b in benches), 3)
             if all(p in (b.get("phases_s") or {}) for b in benches)
@@ -294,6 +317,7 @@ def table(comparison: dict) -> str:
 
     line("wall time median [s]", lambda r: cell(r["wall_median_s"], 1))
     line("wall time min – max [s]", lambda r: f"{r['wall_min_s']:.1f} – {r['wall_max_s']:.1f}")
+    line("with the pictures, median [s]", lambda r: cell(r.get("with_pictures_median_s"), 1))
     for stage in STAGES:
         line(f"{stage}, median [s]", lambda r, s=stage: cell(r["stage_median_s"][s], 1))
     for phase in comparison["phases"]:

@@ -90,6 +90,8 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     for key in ("linear_solves", "final_elements", "energy_error_%"):
         assert current[key] is not None and current[key] == against[key]
     assert current["fracture_time"] is None and against["fracture_time"] is None
+    # The command's pictures come on top of the load history.
+    assert current["with_pictures_median_s"] > current["wall_median_s"]
     # No break step before t = 1.35: every step's wall is before it.
     stages = current["stage_median_s"]
     assert stages["before the break"] > 0
