@@ -121,3 +121,43 @@ def test_stability_judges_the_broken_body_against_the_reference():
     judged = stability.judge(row, "Δt=0.05")
     assert judged["verdict"] == "wrong: broken I_j +3.6 %"
     assert judged["broken_energy_error_%"] == 3.6
+
+
+def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
+    # A cheap step of the quick variant (t = 1.35, 19 iterations, two new meshes) stands for
+    # the break step: resumed twice from the checkpoint of t = 1.30, it must repeat the
+    # uninterrupted run's step to the last bit, and the trace must hold its iterations.
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
+            "--at", "1.35", "--repeats", "2", "--out", str(tmp_path),
+        ],
+        check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    bench = json.loads((tmp_path / "bench.json").read_text())
+    result, _, _ = quick_run
+    (step,) = [r for r in result.records if abs(r["t"] - 1.35) < 1e-9]
+    (before,) = [r for r in result.records if abs(r["t"] - 1.30) < 1e-9]
+    assert bench["repeatable"]
+    assert bench["total_after"] == step["total"] and bench["elements_after"] == step["elements"]
+    assert bench["total_before"] == pytest.approx(before["total"], rel=1e-12)
+    assert bench["iterations"] == step["am_iterations"] > 1
+    trace = list(csv.DictReader(open(tmp_path / "trace.csv")))
+    assert len(trace) == step["am_iterations"]
+    assert int(trace[-1]["elements"]) == step["elements"]
+    assert float(trace[-1]["total"]) == pytest.approx(step["total"], rel=1e-9)
+    seconds = [float(row["seconds"]) for row in trace]
+    assert seconds == sorted(seconds) and seconds[-1] <= max(bench["wall_s"]["each"])
+    assert (tmp_path / "trace.png").stat().st_size > 10_000
+
+
+def test_bench_break_step_refuses_a_time_that_is_not_a_load_time(tmp_path):
+    done = subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
+            "--at", "1.37", "--out", str(tmp_path),
+        ],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "--at 1.37 is not a load time of the scene" in done.stderr

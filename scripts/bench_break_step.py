@@ -1,0 +1,201 @@
+"""Benchmark: the break step of the paper's example alone, iteration by iteration.
+
+Question: where does the load step in which the cracks run through the body (two thirds of
+the wall of ``ngat run two-slits``) spend its iterations and its seconds: how many iterations
+while the cracks creep, how many on a new mesh while they run, how many while the broken body
+settles, and does a change of the code or of a parameter shorten it without changing the
+answer?
+
+The load history is run once up to the step before ``--at`` (default t = 1.40, the default
+run's fracture time) with a checkpoint after every step, into ``--out``/``checkpoint`` (kept
+and reused while the scene, ``--quick`` and ``--set`` are the same: a study of the code can
+resume every variant from one state). Each of ``--repeats`` runs (default 3) copies that
+folder and resumes it (``ngat.driver.run(..., resume=True)``) for the one step at ``--at``;
+a resumed step is the uninterrupted run's to the last bit, so the repeats must agree exactly
+(``repeatable``), and their wall times measure the machine's noise.
+
+Output in ``--out`` (default ``results/bench_break_step``): ``bench.json`` (iterations, linear
+solves, Newton steps and escapes, refinements, elements and I_j before and after, the step's
+wall median/min/max, the iterations that started on a new mesh and their seconds),
+``trace.csv`` (per iteration of the first repeat: seconds since the step began, elements,
+‖v^n − v^{n−1}‖_∞, I_j after the v-step) and ``trace.png`` (the trace against the
+iteration). Run ``python scripts/bench_break_step.py`` (the paper's example, about 11 s for the
+checkpoint and 20 s per repeat on two cores) or ``--quick`` (the scene's quick variant).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import shutil
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ngat.driver import run
+from ngat.experiment import plan_run
+from ngat.output import OutputError
+from ngat.rendering import DPI, PNG
+
+
+class Stop(Exception):
+    """Ends a run after the step it was started for."""
+
+
+def step_index(times: np.ndarray, at: float) -> int:
+    """Return the index of the load time ``at``; ``ValueError`` unless it is one after the first."""
+    matches = np.flatnonzero(np.isclose(times, at, rtol=0, atol=1e-9))
+    if len(matches) == 0 or matches[0] == 0:
+        raise ValueError(f"--at {at} is not a load time of the scene after its first")
+    return int(matches[0])
+
+
+def stop_after(step: int):
+    """Return an ``on_step`` callback that raises :class:`Stop` after load step ``step``."""
+
+    def on_step(record: dict) -> None:
+        if record["step"] >= step:
+            raise Stop
+
+    return on_step
+
+
+def checkpoint_before(scene: str, quick: bool, changes: dict, at: float, folder: Path) -> int:
+    """Make (or reuse) the run in ``folder`` stopped after the step before ``at``.
+
+    Returns the index of the step at ``at``.
+    """
+    try:
+        plan = plan_run(scene, out=folder, quick=quick, resume=True, changes=changes)
+        k = step_index(plan.times, at)
+        if plan.done == k:
+            return k
+    except OutputError:
+        pass  # another scene, --quick or --set: made afresh
+    plan = plan_run(scene, out=folder, quick=quick, overwrite=True, changes=changes)
+    k = step_index(plan.times, at)
+    try:
+        run(plan.scene, plan.parameters, plan.times, plan.folder, on_step=stop_after(k - 1))
+    except Stop:
+        pass
+    return k
+
+
+def break_step(scene: str, quick: bool, changes: dict, source: Path, work: Path, k: int):
+    """Resume a copy of ``source`` for step ``k``; return its record and the per-iteration trace."""
+    shutil.rmtree(work, ignore_errors=True)
+    shutil.copytree(source, work)
+    plan = plan_run(scene, out=work, quick=quick, resume=True, changes=changes)
+    trace: list[dict] = []
+    marks = {"begin": None}
+
+    def monitor(stage: str, state) -> None:
+        now = time.perf_counter()
+        if marks["begin"] is None:
+            marks["begin"] = now  # the step's first half-step has ended: close enough
+        if stage != "v":
+            return
+        change = float(np.max(np.abs(state.v_values - state.v_iter.vec.FV().NumPy())))
+        trace.append(
+            {"iteration": len(trace) + 1, "seconds": now - marks["begin"],
+             "elements": state.arrays.ne, "change": change,
+             "total": state.energies()["total"]}
+        )  # fmt: skip
+
+    records: list[dict] = []
+
+    def on_step(record: dict) -> None:
+        records.append(record)
+        raise Stop
+
+    try:
+        run(plan.scene, plan.parameters, plan.times, plan.folder, on_step, monitor, resume=True)
+    except Stop:
+        pass
+    return records[-1], trace
+
+
+def new_mesh_iterations(trace: list[dict]) -> tuple[int, float]:
+    """Return the iterations that ended on another mesh than the one before, and their seconds."""
+    count, seconds = 0, 0.0
+    for before, now in zip(trace, trace[1:], strict=False):
+        if now["elements"] != before["elements"]:
+            count += 1
+            seconds += now["seconds"] - before["seconds"]
+    return count, seconds
+
+
+def draw_trace(trace: list[dict], path: Path) -> None:
+    """Draw ‖Δv‖∞, elements and seconds per iteration against the iteration into ``path``."""
+    from matplotlib.figure import Figure
+
+    iteration = np.array([r["iteration"] for r in trace])
+    seconds = np.diff(np.concatenate([[0.0], [r["seconds"] for r in trace]]))
+    fig = Figure(figsize=(7, 7), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    axes[0].semilogy(iteration, [r["change"] for r in trace], "k.-", markersize=3)
+    axes[0].set_ylabel(r"$\|v^n - v^{n-1}\|_\infty$")
+    axes[1].step(iteration, [r["elements"] for r in trace], where="mid", color="C2")
+    axes[1].set_ylabel("elements")
+    axes[2].bar(iteration, seconds, width=0.8, color="C0")
+    axes[2].set_ylabel("seconds")
+    axes[2].set_xlabel("iteration of the break step")
+    for ax in axes:
+        ax.grid(True, lw=0.3, alpha=0.5)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="two-slits")
+    parser.add_argument("--quick", action="store_true", help="the scene's quick variant")
+    parser.add_argument("--at", type=float, default=1.40, help="load time of the break step")
+    parser.add_argument("--repeats", type=int, default=3, help="resumed runs of the step")
+    parser.add_argument("--set", nargs="*", default=[], help="parameter changes, NAME=VALUE")
+    parser.add_argument("--out", type=Path, default=Path("results/bench_break_step"))
+    args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
+    changes = dict(item.split("=", 1) for item in args.set) | {"checkpoint_every": "0"}
+    source = args.out / "checkpoint"
+    try:
+        k = checkpoint_before(args.scene, args.quick, changes, args.at, source)
+    except ValueError as error:
+        parser.error(str(error))
+    before = list(csv.DictReader(open(source / "energies.csv")))[-1]
+    results = [
+        break_step(args.scene, args.quick, changes, source, args.out / "resumed", k)
+        for _ in range(args.repeats)
+    ]
+    record, trace = results[0]
+    walls = [r["wall_s"] for r, _ in results]
+    on_new_mesh, new_mesh_seconds = new_mesh_iterations(trace)
+    bench = {
+        "scene": args.scene, "quick": args.quick, "at": args.at, "changes": changes,
+        "iterations": record["am_iterations"], "linear_solves": record["linear_solves"],
+        "newton_steps": record["newton_steps"], "escapes": record["escapes"],
+        "refinements": record["refinements"],
+        "elements_before": int(before["elements"]), "elements_after": record["elements"],
+        "total_before": float(before["total"]), "total_after": record["total"],
+        "wall_s": {"median": statistics.median(walls), "min": min(walls), "max": max(walls),
+                   "each": walls},
+        "iterations_on_a_new_mesh": on_new_mesh,
+        "their_seconds": round(new_mesh_seconds, 3),
+        "repeatable": all(r["total"] == record["total"] and r["elements"] == record["elements"]
+                          and r["am_iterations"] == record["am_iterations"]
+                          for r, _ in results),
+    }  # fmt: skip
+    with open(args.out / "trace.csv", "w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(trace[0]))
+        writer.writeheader()
+        writer.writerows(trace)
+    draw_trace(trace, args.out / "trace.png")
+    (args.out / "bench.json").write_text(json.dumps(bench, indent=2))
+    print(json.dumps(bench, indent=2))
+
+
+if __name__ == "__main__":
+    main()
