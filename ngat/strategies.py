@@ -303,8 +303,8 @@ class NewtonSwitch:
     A rejection used to lower the threshold to half the current change instead, which where
     the cracks then run (the change grows) ended Newton for the rest of the load step: the
     paper's example's break step, from the state at t = 1.39 that Newton's escapes of 0.3
-    instead of 0.1 (``escape_size``) lead to, rejected one step early on and took 270
-    iterations that way, 118 with the wait (with escapes of 0.5: 159 and 127). The
+    (``escape_size``) lead to, rejected one step early on and took 270 iterations that way,
+    118 with the wait (with escapes of 0.5: 159 and 127). The
     Newton solver is kept across load steps as long as the half-steps' solvers (and so the
     state) are the same.
 
