@@ -32,13 +32,17 @@ def test_the_running_crack_jumps_and_ends_where_alternating_minimisation_ends(ru
     plain, jumped = runs[False], runs[True]
     assert plain["converged"] and jumped["converged"]
     assert plain["extensions"] == 0 and jumped["extensions"] >= 2
-    # Measured: 58 iterations and 142 linear solves against 25 and 77.
+    # Measured: 76 iterations and 169 linear solves against 24 and 64 (100 and 212 against 33
+    # and 92 with Newton's escapes of ‖d_v‖∞ = 0.1 instead of 0.5).
     assert jumped["am_iterations"] < 0.6 * plain["am_iterations"]
     assert jumped["linear_solves"] < 0.7 * plain["linear_solves"]
-    # The same crack: the tip within ε/2, I_j within 0.1 % (measured 1e-4 ε, 0.06 %).
+    # The same crack: the tip within ε/2, I_j within 0.2 % (measured 0.05ε, 0.13 %; 0.02ε and
+    # 0.06 % with escapes of 0.1, whose plain run ended 0.05 % lower than this one's). The
+    # extension's failure this catches is a crack that jumped off its path: +3.6–7.8 % on
+    # two-slits (docs/stability.md).
     assert jumped["tip1_x"] == pytest.approx(plain["tip1_x"], abs=EPS / 2)
     assert abs(jumped["tip1_y"]) < 2 * EPS
-    assert jumped["total"] == pytest.approx(plain["total"], rel=1e-3)
+    assert jumped["total"] == pytest.approx(plain["total"], rel=2e-3)
     assert jumped["tip1_x"] > surfing.CRACK_LENGTH + 0.25
 
 
