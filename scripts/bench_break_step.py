@@ -14,6 +14,13 @@ folder and resumes it (``ngat.driver.run(..., resume=True)``) for the one step a
 a resumed step is the uninterrupted run's to the last bit, so the repeats must agree exactly
 (``repeatable``), and their wall times measure the machine's noise.
 
+The step is chaotic: a change at round-off level sends the cracks along another path, with
+other iteration counts (the paper's break step: 132–142 iterations over six such draws). One
+draw therefore says little about a change of the code; ``--samples K`` resumes K more copies
+whose v is multiplied by 1 − 1e−9 r (r uniform in [0, 1), seeds 1 … K: a perturbation at
+round-off level that keeps 0 ≤ v ≤ 1 and the crack set), and reports each draw and their
+median, so that two versions compare by their distributions.
+
 Output in ``--out`` (default ``results/bench_break_step``): ``bench.json`` (iterations, linear
 solves, Newton steps and escapes, refinements, elements and I_j before and after, the step's
 wall median/min/max, the iterations that started on a new mesh and their seconds),
@@ -84,10 +91,31 @@ def checkpoint_before(scene: str, quick: bool, changes: dict, at: float, folder:
     return k
 
 
-def break_step(scene: str, quick: bool, changes: dict, source: Path, work: Path, k: int):
-    """Resume a copy of ``source`` for step ``k``; return its record and the per-iteration trace."""
+PERTURBATION = 1e-9
+"""Relative size of the perturbation of v in a sample (``--samples``)."""
+
+
+def perturb(folder: Path, seed: int) -> None:
+    """Multiply v in the checkpoint of ``folder`` by 1 − :data:`PERTURBATION` · r, r ~ U[0, 1)."""
+    path = folder / "checkpoint.npz"
+    with np.load(path, allow_pickle=False) as stored:
+        arrays = dict(stored)
+    r = np.random.default_rng(seed).random(len(arrays["v"]))
+    arrays["v"] = arrays["v"] * (1 - PERTURBATION * r)
+    np.savez(path, **arrays)
+
+
+def break_step(
+    scene: str, quick: bool, changes: dict, source: Path, work: Path, k: int, seed: int = 0
+):
+    """Resume a copy of ``source`` for step ``k``; return its record and the per-iteration trace.
+
+    With ``seed`` > 0 the copy's v is perturbed first (:func:`perturb`).
+    """
     shutil.rmtree(work, ignore_errors=True)
     shutil.copytree(source, work)
+    if seed:
+        perturb(work, seed)
     plan = plan_run(scene, out=work, quick=quick, resume=True, changes=changes)
     trace: list[dict] = []
     marks = {"begin": None}
@@ -128,6 +156,17 @@ def new_mesh_iterations(trace: list[dict]) -> tuple[int, float]:
     return count, seconds
 
 
+def sample_summary(records: list[dict]) -> dict:
+    """Return the draws (the unperturbed step first) and the median of each measure."""
+    keys = {"iterations": "am_iterations", "linear_solves": "linear_solves", "wall_s": "wall_s",
+            "total_after": "total", "elements_after": "elements"}  # fmt: skip
+    each = [{name: r[key] for name, key in keys.items()} for r in records]
+    return {
+        "draws": each,
+        "median": {name: statistics.median(d[name] for d in each) for name in keys},
+    }
+
+
 def draw_trace(trace: list[dict], path: Path) -> None:
     """Draw ‖Δv‖∞, elements and seconds per iteration against the iteration into ``path``."""
     from matplotlib.figure import Figure
@@ -154,11 +193,16 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the scene's quick variant")
     parser.add_argument("--at", type=float, default=1.40, help="load time of the break step")
     parser.add_argument("--repeats", type=int, default=3, help="resumed runs of the step")
+    parser.add_argument(
+        "--samples", type=int, default=0, help="resumed runs with v perturbed at round-off level"
+    )
     parser.add_argument("--set", nargs="*", default=[], help="parameter changes, NAME=VALUE")
     parser.add_argument("--out", type=Path, default=Path("results/bench_break_step"))
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
+    if args.samples < 0:
+        parser.error(f"--samples must be 0 or more, got {args.samples}")
     changes = dict(item.split("=", 1) for item in args.set) | {"checkpoint_every": "0"}
     source = args.out / "checkpoint"
     try:
@@ -169,6 +213,10 @@ def main() -> None:
     results = [
         break_step(args.scene, args.quick, changes, source, args.out / "resumed", k)
         for _ in range(args.repeats)
+    ]
+    draws = [
+        break_step(args.scene, args.quick, changes, source, args.out / "resumed", k, seed)[0]
+        for seed in range(1, args.samples + 1)
     ]
     record, trace = results[0]
     walls = [r["wall_s"] for r, _ in results]
@@ -188,6 +236,8 @@ def main() -> None:
                           and r["am_iterations"] == record["am_iterations"]
                           for r, _ in results),
     }  # fmt: skip
+    if draws:
+        bench["samples"] = sample_summary([record, *draws])
     with open(args.out / "trace.csv", "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(trace[0]))
         writer.writeheader()

@@ -3,10 +3,12 @@
 import csv
 import importlib.util
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -130,7 +132,7 @@ def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
     subprocess.run(
         [
             sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
-            "--at", "1.35", "--repeats", "2", "--out", str(tmp_path),
+            "--at", "1.35", "--repeats", "2", "--samples", "1", "--out", str(tmp_path),
         ],
         check=True, capture_output=True, timeout=300,
     )  # fmt: skip
@@ -149,6 +151,22 @@ def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
     seconds = [float(row["seconds"]) for row in trace]
     assert seconds == sorted(seconds) and seconds[-1] <= max(bench["wall_s"]["each"])
     assert (tmp_path / "trace.png").stat().st_size > 10_000
+    # A draw from v perturbed by at most 1e−9 of itself ends at the same critical point of
+    # this stable step; the perturbation moves every v that is not 0 down, and no further.
+    unperturbed, perturbed = bench["samples"]["draws"]
+    assert unperturbed["total_after"] == step["total"]
+    assert perturbed["total_after"] == pytest.approx(step["total"], rel=1e-5)
+    spec = importlib.util.spec_from_file_location(
+        "bench_break_step", ROOT / "scripts" / "bench_break_step.py"
+    )
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    copy = tmp_path / "perturbed"
+    shutil.copytree(tmp_path / "checkpoint", copy)
+    script.perturb(copy, seed=1)
+    v = np.load(tmp_path / "checkpoint" / "checkpoint.npz")["v"]
+    moved = v - np.load(copy / "checkpoint.npz")["v"]
+    assert np.all(moved[v > 0] > 0) and np.all(moved <= script.PERTURBATION * v)
 
 
 def test_bench_break_step_refuses_a_time_that_is_not_a_load_time(tmp_path):
