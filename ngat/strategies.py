@@ -304,9 +304,8 @@ class NewtonSwitch:
     the cracks then run (the change grows) ended Newton for the rest of the load step: the
     paper's example's break step, from the state at t = 1.39 that Newton's escapes of 0.3
     (``escape_size``) lead to, rejected one step early on and took 270 iterations that way,
-    118 with the wait (with escapes of 0.5: 159 and 127). The
-    Newton solver is kept across load steps as long as the half-steps' solvers (and so the
-    state) are the same.
+    118 with the wait (with escapes of 0.5: 159 and 127). The Newton solver is kept across
+    load steps as long as the half-steps' solvers (and so the state) are the same.
 
     Parameters
     ----------

@@ -46,6 +46,7 @@ from ngat.driver import run
 from ngat.experiment import plan_run
 from ngat.output import OutputError
 from ngat.rendering import DPI, PNG
+from ngat.results import read_records
 
 
 class Stop(Exception):
@@ -118,17 +119,18 @@ def break_step(
         perturb(work, seed)
     plan = plan_run(scene, out=work, quick=quick, resume=True, changes=changes)
     trace: list[dict] = []
-    marks = {"begin": None}
+    begin = None
 
     def monitor(stage: str, state) -> None:
+        nonlocal begin
         now = time.perf_counter()
-        if marks["begin"] is None:
-            marks["begin"] = now  # the step's first half-step has ended: close enough
+        if begin is None:
+            begin = now  # the step's first half-step has ended: close enough
         if stage != "v":
             return
         change = float(np.max(np.abs(state.v_values - state.v_iter.vec.FV().NumPy())))
         trace.append(
-            {"iteration": len(trace) + 1, "seconds": now - marks["begin"],
+            {"iteration": len(trace) + 1, "seconds": now - begin,
              "elements": state.arrays.ne, "change": change,
              "total": state.energies()["total"]}
         )  # fmt: skip
@@ -156,14 +158,22 @@ def new_mesh_iterations(trace: list[dict]) -> tuple[int, float]:
     return count, seconds
 
 
+OUTCOME = {"iterations": "am_iterations", "linear_solves": "linear_solves",
+           "total_after": "total", "elements_after": "elements"}  # fmt: skip
+"""What a step computed, by the names of ``bench.json`` (the wall aside)."""
+
+
+def outcome(record: dict) -> dict:
+    """Return the :data:`OUTCOME` of a step's record."""
+    return {name: record[key] for name, key in OUTCOME.items()}
+
+
 def sample_summary(records: list[dict]) -> dict:
     """Return the draws (the unperturbed step first) and the median of each measure."""
-    keys = {"iterations": "am_iterations", "linear_solves": "linear_solves", "wall_s": "wall_s",
-            "total_after": "total", "elements_after": "elements"}  # fmt: skip
-    each = [{name: r[key] for name, key in keys.items()} for r in records]
+    each = [outcome(r) | {"wall_s": r["wall_s"]} for r in records]
     return {
         "draws": each,
-        "median": {name: statistics.median(d[name] for d in each) for name in keys},
+        "median": {name: statistics.median(d[name] for d in each) for name in each[0]},
     }
 
 
@@ -209,7 +219,7 @@ def main() -> None:
         k = checkpoint_before(args.scene, args.quick, changes, args.at, source)
     except ValueError as error:
         parser.error(str(error))
-    before = list(csv.DictReader(open(source / "energies.csv")))[-1]
+    before = read_records(source / "energies.csv")[-1]
     results = [
         break_step(args.scene, args.quick, changes, source, args.out / "resumed", k)
         for _ in range(args.repeats)
@@ -223,18 +233,15 @@ def main() -> None:
     on_new_mesh, new_mesh_seconds = new_mesh_iterations(trace)
     bench = {
         "scene": args.scene, "quick": args.quick, "at": args.at, "changes": changes,
-        "iterations": record["am_iterations"], "linear_solves": record["linear_solves"],
+        **outcome(record),
         "newton_steps": record["newton_steps"], "escapes": record["escapes"],
         "refinements": record["refinements"],
-        "elements_before": int(before["elements"]), "elements_after": record["elements"],
-        "total_before": float(before["total"]), "total_after": record["total"],
+        "elements_before": before["elements"], "total_before": before["total"],
         "wall_s": {"median": statistics.median(walls), "min": min(walls), "max": max(walls),
                    "each": walls},
         "iterations_on_a_new_mesh": on_new_mesh,
         "their_seconds": round(new_mesh_seconds, 3),
-        "repeatable": all(r["total"] == record["total"] and r["elements"] == record["elements"]
-                          and r["am_iterations"] == record["am_iterations"]
-                          for r, _ in results),
+        "repeatable": all(outcome(r) == outcome(record) for r, _ in results),
     }  # fmt: skip
     if draws:
         bench["samples"] = sample_summary([record, *draws])
