@@ -41,6 +41,7 @@ __all__ = [
     "graph_positions",
     "sparse_from_coo",
     "mesh_edges",
+    "upper_graph",
     "edge_numbering",
     "unique_keys",
     "MeshArrays",
@@ -332,6 +333,27 @@ def mesh_edges(elements: np.ndarray) -> np.ndarray:
     size = int(elements.max(initial=-1)) + 1
     keys = edge_numbering(elements, size)[0]
     return np.stack([keys // size, keys % size], axis=1)
+
+
+def upper_graph(elements: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the CSR graph (indptr, indices) of a P1 matrix's upper triangle on a mesh.
+
+    Row a holds a and the upper ends of the edges out of a, sorted: the graph
+    :func:`ngat.pardiso.vertex_ordering` reads from :func:`graph_matrix`, to the entry, built
+    from the triangles alone (no mesh arrays), so that METIS can start on a new mesh first.
+
+    Parameters
+    ----------
+    elements
+        (ne, 3) vertex numbers of the triangles.
+    nv
+        Number of vertices.
+    """
+    diagonal = np.arange(nv, dtype=np.int64)
+    keys = np.sort(np.concatenate([edge_numbering(elements, nv)[0], diagonal * (nv + 1)]))
+    counts = np.bincount(keys // nv, minlength=nv)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return indptr, (keys % nv).astype(np.int32)
 
 
 def row_sum(values: np.ndarray) -> np.ndarray:

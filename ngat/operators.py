@@ -20,7 +20,6 @@ import functools
 
 import numpy as np
 
-from ngat import pardiso
 from ngat.forms import LumpedAssembler, graph_matrix
 from ngat.state import ATState
 
@@ -50,8 +49,9 @@ class LumpedOperators:
     ordering
         A fill-reducing ordering of the mesh's vertices shared by every sparse factorisation
         on it (a_j, b_j, Newton's Hessian; :func:`ngat.pardiso.vertex_ordering`), computed in
-        the background from the moment the operators exist (the first use waits for it);
-        ``None`` where NGSolve's sparse Cholesky computes its own.
+        the background from the moment the mesh exists
+        (:meth:`ngat.state.ATState.start_ordering`; the first use waits for it); ``None``
+        where NGSolve's sparse Cholesky computes its own.
     """
 
     def __init__(self, state: ATState):
@@ -62,10 +62,7 @@ class LumpedOperators:
             # The graphs come from the edges (b_j's is a_j's when u is scalar), the values from
             # the vectorised assemblers (equal to a_form and b_form, tests/test_forms.py).
             self.b_matrix = graph_matrix(arrays)
-            # METIS orders the new mesh in the background while the set-up goes on.
-            self._ordering = (
-                pardiso.background_vertex_ordering(self.b_matrix) if pardiso.AVAILABLE else None
-            )
+            self._ordering = state.vertex_ordering
             if density.components == 1:
                 self.a_matrix = self.b_matrix.CreateMatrix()
             else:

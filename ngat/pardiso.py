@@ -36,7 +36,7 @@ __all__ = [
     "MKL_CBWR_AUTO",
     "TWO_LEVEL",
     "Pardiso",
-    "background_vertex_ordering",
+    "background_ordering",
     "in_background",
     "PardisoError",
     "PardisoInverse",
@@ -423,7 +423,7 @@ def vertex_ordering(matrix: SparseMatrixd) -> np.ndarray:
     One per mesh serves every factorisation on it (:class:`PardisoInverse`'s ``ordering``):
     a_j and b_j with their free DOFs, Newton's Hessian with its DOFs vertex by vertex. METIS
     runs in its sequential version, on one thread, so that it can run in the background
-    (:func:`background_vertex_ordering`); the OpenMP version on two threads is faster (0.28
+    (:func:`background_ordering`); the OpenMP version on two threads is faster (0.28
     against 0.46 s at 122k DOFs) and gave the same ordering in every comparison.
 
     The analysis that computed it is released, though b_j on all DOFs could factorise on it (one
@@ -435,14 +435,13 @@ def vertex_ordering(matrix: SparseMatrixd) -> np.ndarray:
     return _ordering(*_upper_triangle(matrix, np.arange(matrix.height))[1:])
 
 
-def background_vertex_ordering(matrix: SparseMatrixd) -> Future:
-    """Start :func:`vertex_ordering` in the worker thread (:func:`_worker`); return its future.
+def background_ordering(graph: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Future:
+    """Start METIS's ordering of the upper triangle's CSR graph ``graph()`` in the worker thread.
 
-    The matrix's graph is read at once; its values may change meanwhile. A new mesh's set-up
-    goes on while METIS orders its vertices.
+    The graph is built there too (:func:`_worker`): a new mesh's set-up goes on meanwhile, and
+    its first factorisation waits for the ordering (:func:`vertex_ordering` gives the same).
     """
-    _, indptr, indices = _upper_triangle(matrix, np.arange(matrix.height))
-    return in_background(_ordering, indptr, indices)
+    return in_background(lambda: _ordering(*graph()))
 
 
 def _ordering(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:

@@ -91,12 +91,14 @@ def bisect(state: ATState, marked: np.ndarray) -> int:
     return count
 
 
-def rebuild(state: ATState) -> None:
+def rebuild(state: ATState, order: bool = True) -> None:
     """Rebuild the state's operators after :func:`bisect` and set g(t_k) on the new Ω_D vertices.
 
     The new vertices of Ω_D take g(t_k) itself, not the interpolant of the coarser mesh.
+    ``order``: start the mesh's ordering at once (:meth:`ngat.state.ATState.mesh_changed`);
+    false for a mesh that is refined again before anything is solved on it.
     """
-    state.mesh_changed()
+    state.mesh_changed(order)
     state.apply_load(state.t.Get())
 
 

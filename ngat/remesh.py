@@ -371,7 +371,7 @@ class TipRemesher:
                 if not long.any():
                     break
                 bisect(state, long)
-                rebuild(state)
+                rebuild(state, order=False)  # re-meshed next: no solve on this mesh
             region = patch_region(
                 state.arrays.coords, state.arrays.elements, self._allowed(state), tip, self.radius
             )

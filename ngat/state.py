@@ -11,6 +11,7 @@ the nonlinear solvers of a load step are :mod:`ngat.strategies`.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Hashable, Mapping
 from concurrent.futures import Future
@@ -20,9 +21,10 @@ import ngsolve
 import numpy as np
 from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule, Parameter
 
+from ngat import pardiso
 from ngat.elasticity import elasticity
 from ngat.estimators import EdgeTopology
-from ngat.forms import MeshArrays
+from ngat.forms import MeshArrays, upper_graph
 from ngat.functional import LumpedFunctional
 from ngat.parameters import ModelParameters
 from ngat.pardiso import in_background
@@ -93,6 +95,7 @@ class ATState:
         self.refinements: list = []
         self.v.vec[:] = 1.0
         self.v_prev.vec[:] = 1.0
+        self._ordering: Future | None = None
         self.mesh_changed()
 
     def _set_mesh(self, mesh: ngsolve.Mesh) -> None:
@@ -130,8 +133,18 @@ class ATState:
         return [change for change in self.refinements if not isinstance(change, np.ndarray)]
 
     # -- set-up per mesh --------------------------------------------------------------------
-    def mesh_changed(self) -> None:
-        """Rebuild everything that depends on the mesh (call after ``mesh.Refine()``)."""
+    def mesh_changed(self, order: bool = True) -> None:
+        """Rebuild everything that depends on the mesh (call after ``mesh.Refine()``).
+
+        ``order``: start METIS's ordering of the new mesh first (:meth:`start_ordering`), for
+        a mesh that will be solved on; an intermediate mesh (the re-mesher's rounds) leaves it
+        to the first use.
+        """
+        if self._ordering is not None:
+            self._ordering.cancel()  # the ordering of a mesh gone, if it has not started
+        self._ordering = None
+        if order:
+            self.start_ordering()
         with self.timer("assembly"):
             self.arrays = arrays = MeshArrays(self.mesh)
             count = self.elasticity.components
@@ -245,6 +258,24 @@ class ATState:
         elif isinstance(self._edges, Future):
             self._edges = self._edges.result()
         return self._edges
+
+    def start_ordering(self) -> None:
+        """Start METIS's fill-reducing ordering of the mesh's vertices in the background.
+
+        From the triangles alone (:func:`ngat.forms.upper_graph`), before the mesh's arrays
+        and operators are built: the first factorisation on the mesh waits for it
+        (:attr:`vertex_ordering`). None without MKL PARDISO (NGSolve's Cholesky orders itself).
+        """
+        if self._ordering is None and pardiso.AVAILABLE:
+            elements = self.mesh.ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
+            graph = functools.partial(upper_graph, elements, self.mesh.nv)
+            self._ordering = pardiso.background_ordering(graph)
+
+    @property
+    def vertex_ordering(self) -> Future | None:
+        """The future of the mesh's ordering (:meth:`start_ordering`, started if it was not)."""
+        self.start_ordering()
+        return self._ordering
 
     def start_edges(self) -> None:
         """Start building :attr:`edges` in the background (:func:`ngat.pardiso.in_background`).

@@ -18,10 +18,10 @@ from threadpoolctl import threadpool_limits
 
 import ngat.pardiso
 from ngat.driver import run
-from ngat.forms import sparse_from_coo
+from ngat.forms import MeshArrays, graph_matrix, sparse_from_coo, upper_graph
 from ngat.pardiso import (
     PardisoInverse,
-    background_vertex_ordering,
+    background_ordering,
     sparse_inverse,
     vertex_ordering,
 )
@@ -131,13 +131,20 @@ def test_one_vertex_ordering_serves_the_free_dofs_and_every_component(p1):
 
 
 @needs_mkl
-def test_the_background_ordering_is_metis_ordering_and_leaves_the_values_free(p1):
-    stiffness, mass, _ = p1
-    matrix = as_ngsolve(stiffness + mass)
+def test_the_background_ordering_from_the_triangles_is_metis_ordering_of_the_p1_matrix():
+    mesh = Mesh(unit_square.GenerateMesh(maxh=0.08))
+    mesh.SetRefinementFlags([i % 3 == 0 for i in range(mesh.ne)])
+    mesh.Refine()  # bisected: vertex numbers no longer follow the mesher's
+    arrays = MeshArrays(mesh)
+    matrix = graph_matrix(arrays)
+    indptr, indices = upper_graph(arrays.elements, arrays.nv)
+    _, expected_indptr, expected_indices = ngat.pardiso._upper_triangle(
+        matrix, np.arange(arrays.nv)
+    )
+    assert np.array_equal(indptr, expected_indptr)
+    assert np.array_equal(indices, expected_indices)
     expected = vertex_ordering(matrix)
-    future = background_vertex_ordering(matrix)
-    matrix.AsVector().FV().NumPy()[:] = 0.0  # the graph was read at once: values may change
-    assert np.array_equal(future.result(), expected)
+    assert np.array_equal(background_ordering(lambda: (indptr, indices)).result(), expected)
     assert not np.array_equal(expected, np.arange(len(expected)))  # an ordering, not the identity
 
 
