@@ -341,6 +341,9 @@ def upper_graph(elements: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
     Row a holds a and the upper ends of the edges out of a, sorted: the graph
     :func:`ngat.pardiso.vertex_ordering` reads from :func:`graph_matrix`, to the entry, built
     from the triangles alone (no mesh arrays), so that METIS can start on a new mesh first.
+    The worker thread numbers the edges for it while the main thread numbers them again for
+    the mesh's arrays (:attr:`MeshArrays.edge_numbering`): done twice, on two cores, so that
+    neither waits for the other.
 
     Parameters
     ----------
