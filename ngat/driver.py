@@ -344,7 +344,7 @@ def _run_locked(
             fields = {"u": state.u, "v": state.v} if output.writes_fields(k, len(times)) else None
             with signals_held():
                 with timer("output"):
-                    writer.write_step(record, state.mesh, fields)
+                    writer.write_step(record, state.arrays, fields)
                 if diagnostics.pending or output.checkpoint_due(
                     k, len(times), time.perf_counter() - checkpointed
                 ):

@@ -25,16 +25,16 @@ from pathlib import Path
 from typing import IO, Any
 from xml.sax.saxutils import quoteattr
 
-import ngsolve
 import numpy as np
 
-from ngat.band import mesh_geometry
+from ngat.forms import MeshArrays
 from ngat.parameters import computing, with_legacy_values
 
 __all__ = [
     "ResultsWriter",
     "vtu_name",
-    "write_vtu",
+    "write_grid",
+    "vtu_grid",
     "atomic_file",
     "write_atomic",
     "writing",
@@ -260,38 +260,52 @@ def vtu_name(step: int) -> str:
     return f"fields/step_{step:04d}.vtu"
 
 
-def write_vtu(path: Path, mesh: ngsolve.Mesh, fields: dict) -> None:
-    """Write P1 fields on a triangle mesh to the VTU file ``path`` (raw binary).
+def vtu_grid(points: np.ndarray, triangles: np.ndarray):
+    """Return the pyvista ``UnstructuredGrid`` of a triangle mesh, without data.
 
-    One point per mesh vertex, shared by its triangles, and the nodal values as point data
-    (a plane model's u with its two components). NGSolve's ``VTKOutput`` writes ASCII with
-    three points per triangle. Uncompressed, so that a step's file has the same size on the
-    same mesh whatever the values (``tests/test_output_growth.py``). The arrays are appended
-    raw after the XML (VTK's appended mode without encoding): pyvista's ``save`` encodes them
-    in base64, which took 0.14 s instead of 0.01 s for a file of 180k elements, a third more
-    bytes.
+    One point per mesh vertex, shared by its triangles (NGSolve's ``VTKOutput`` writes ASCII
+    with three points per triangle). Built once per mesh by :class:`ResultsWriter`.
+
+    Parameters
+    ----------
+    points, triangles
+        (nv, 2) vertex coordinates and (ne, 3) vertex numbers of the triangles.
+    """
+    # Only the VTU writer needs it; keep `import ngat` light.
+    import pyvista
+
+    cells = np.hstack([np.full((len(triangles), 1), 3, dtype=np.int64), triangles]).ravel()
+    types = np.full(len(triangles), pyvista.CellType.TRIANGLE, dtype=np.uint8)
+    return pyvista.UnstructuredGrid(cells, types, np.c_[points, np.zeros(len(points))])
+
+
+def write_grid(path: Path, grid, values: dict[str, np.ndarray]) -> None:
+    """Write nodal values on the grid of :func:`vtu_grid` to the VTU file ``path`` (raw binary).
+
+    The values become point data (a plane model's u with its two components). Uncompressed,
+    so that a step's file has the same size on the same mesh whatever the values
+    (``tests/test_output_growth.py``). The arrays are appended raw after the XML (VTK's
+    appended mode without encoding): pyvista's ``save`` encodes them in base64, which took
+    0.14 s instead of 0.01 s for a file of 180k elements, a third more bytes.
 
     Parameters
     ----------
     path
         The file to write.
-    mesh
-        The triangle mesh of the fields.
-    fields
-        Name → P1 GridFunction (H1 or VectorH1 of order 1, whose DOFs are the vertices).
+    grid
+        The mesh's grid; its point data are replaced.
+    values
+        Name → nodal values, component-major (a vector field's nv x-values, then its y-values).
     """
-    # Only the VTU writer needs them; keep `import ngat` light.
-    import pyvista
     from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
 
-    points, triangles = mesh_geometry(mesh)
-    cells = np.hstack([np.full((len(triangles), 1), 3, dtype=np.int64), triangles]).ravel()
-    types = np.full(len(triangles), pyvista.CellType.TRIANGLE, dtype=np.uint8)
-    grid = pyvista.UnstructuredGrid(cells, types, np.c_[points, np.zeros(len(points))])
-    for name, field in fields.items():
-        values = field.vec.FV().NumPy()
-        dim = len(values) // len(points)
-        grid.point_data[name] = values.reshape(dim, -1).T.copy() if dim > 1 else values.copy()
+    # The writer keeps the points' range in their information, and a later file of the same
+    # grid would carry it (276 bytes more than the first): every file is written as the first.
+    grid.GetPoints().GetData().GetInformation().Clear()
+    grid.point_data.clear()
+    for name, nodal in values.items():
+        dim = len(nodal) // grid.n_points
+        grid.point_data[name] = nodal.reshape(dim, -1).T.copy() if dim > 1 else nodal.copy()
     writer = vtkXMLUnstructuredGridWriter()
     writer.SetFileName(str(path))
     writer.SetInputData(grid)
@@ -407,13 +421,14 @@ class ResultsWriter:
             logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
         )
         self.log_handler.setLevel(logging.INFO)
+        self._grid: tuple[Any, Any] = (None, None)  # (mesh arrays, their VTU grid)
         logger = logging.getLogger("ngat")
         logger.addHandler(self.log_handler)
         if logger.getEffectiveLevel() > logging.INFO:
             logger.setLevel(logging.INFO)
 
     def write_step(
-        self, record: dict[str, Any], mesh: ngsolve.Mesh, fields: dict | None = None
+        self, record: dict[str, Any], arrays: MeshArrays, fields: dict | None = None
     ) -> None:
         """Append one row to ``energies.csv``; write the step's VTU and add it to ``fields.pvd``.
 
@@ -421,8 +436,9 @@ class ResultsWriter:
         ----------
         record
             The step's values; its keys fix the columns at the first step.
-        mesh
-            Current mesh.
+        arrays
+            The current mesh's arrays (:class:`ngat.forms.MeshArrays`, one object per mesh:
+            the VTU's grid is built once per mesh, :func:`vtu_grid`).
         fields
             Name → GridFunction written to the VTU (u and v); ``None``: no VTU for this step
             (``output_every``).
@@ -435,15 +451,18 @@ class ResultsWriter:
         with writing(self.folder):
             if fields is not None:
                 name = vtu_name(int(record["step"]))
-                self._write_vtu(name, mesh, fields)
+                values = {key: field.vec.FV().NumPy() for key, field in fields.items()}
+                self._write_vtu(name, arrays, values)
                 self.series.append(float(record["t"]), name)
             self._append_row(record)
 
-    def _write_vtu(self, name: str, mesh: ngsolve.Mesh, fields: dict) -> None:
+    def _write_vtu(self, name: str, arrays: MeshArrays, values: dict[str, np.ndarray]) -> None:
         """Write the VTU ``name``; raise :class:`OSError` and remove it unless it is complete."""
         path = self.folder / name
+        if self._grid[0] is not arrays:
+            self._grid = (arrays, vtu_grid(arrays.coords, arrays.elements))
         try:
-            write_vtu(path, mesh, fields)
+            write_grid(path, self._grid[1], values)
             # VTK's writer does not raise on a failed write (it leaves the file cut short).
             if not _ends_with(path, VTU_END):
                 raise OSError(errno.EIO, f"{path.name} came out incomplete; is the disk full?")

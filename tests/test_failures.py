@@ -309,15 +309,15 @@ def test_a_disk_too_full_for_the_summary_still_records_the_status(steps, tmp_pat
 def test_an_incomplete_vtu_is_a_write_error_and_is_not_kept(steps, tmp_path, monkeypatch, capsys):
     # VTK's writer does not report a full disk: it leaves the file cut short.
     _, command, _ = steps
-    real, calls = ngat.output.write_vtu, []
+    real, calls = ngat.output.write_grid, []
 
-    def cut_short(path, mesh, fields):
-        real(path, mesh, fields)
+    def cut_short(path, grid, values):
+        real(path, grid, values)
         calls.append(1)
         if len(calls) == 2:
             os.truncate(path, 1000)
 
-    monkeypatch.setattr(ngat.output, "write_vtu", cut_short)
+    monkeypatch.setattr(ngat.output, "write_grid", cut_short)
     folder = tmp_path / "D"
     assert main([*command, "--out", str(folder)]) == 2
     line = one_line(capsys)

@@ -151,7 +151,8 @@ def test_vtu_holds_the_p1_fields_at_the_mesh_vertices(tmp_path):
     import pyvista
     from netgen.geom2d import unit_square
 
-    from ngat.output import VTU_END, write_vtu
+    from ngat.band import mesh_geometry
+    from ngat.output import VTU_END, vtu_grid, write_grid
 
     mesh = ngsolve.Mesh(unit_square.GenerateMesh(maxh=0.2))
     v = ngsolve.GridFunction(ngsolve.H1(mesh, order=1))
@@ -159,7 +160,8 @@ def test_vtu_holds_the_p1_fields_at_the_mesh_vertices(tmp_path):
     v.Set(ngsolve.x - 2 * ngsolve.y)
     u.Set(ngsolve.CF((ngsolve.x + 1, 2 * ngsolve.y - 3)))
     path = tmp_path / "step.vtu"
-    write_vtu(path, mesh, {"u": u, "v": v})
+    values = {"u": u.vec.FV().NumPy(), "v": v.vec.FV().NumPy()}
+    write_grid(path, vtu_grid(*mesh_geometry(mesh)), values)
     assert path.read_bytes().endswith(VTU_END)
     grid = pyvista.read(path)
     assert (grid.n_points, grid.n_cells) == (mesh.nv, mesh.ne)
@@ -170,3 +172,22 @@ def test_vtu_holds_the_p1_fields_at_the_mesh_vertices(tmp_path):
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     areas = (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / 2
     assert abs(areas).sum() == pytest.approx(1.0)
+
+
+def test_a_grid_kept_for_its_mesh_writes_the_bytes_of_a_new_one(tmp_path):
+    # The writer builds a mesh's grid once and writes every step's values on it: its files
+    # must be those a grid built for the step would give (VTK keeps the points' range on a
+    # grid it has written, and would write it into the next file).
+    import ngsolve
+    from netgen.geom2d import unit_square
+
+    from ngat.band import mesh_geometry
+    from ngat.output import vtu_grid, write_grid
+
+    geometry = mesh_geometry(ngsolve.Mesh(unit_square.GenerateMesh(maxh=0.2)))
+    kept = vtu_grid(*geometry)
+    for step in range(3):
+        values = {"v": np.linspace(0, step + 1, len(geometry[0]))}
+        write_grid(tmp_path / "kept.vtu", kept, values)
+        write_grid(tmp_path / "new.vtu", vtu_grid(*geometry), values)
+        assert (tmp_path / "kept.vtu").read_bytes() == (tmp_path / "new.vtu").read_bytes()
