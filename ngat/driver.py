@@ -309,6 +309,9 @@ def _run_locked(
             forces = half_steps.operators.reaction_forces()
             if k + 1 < len(times):
                 prepare_next_step(state, half_steps, solver.predictor, times, k + 1)
+            mu = step.mu  # the last u-step's, Algorithm 2's test; ν is the final pair's
+            if mu is None:  # an iteration that does not estimate: μ of the final pair
+                mu = float(np.sqrt(estimate(state, "u", crack).sum()))
             record = {"step": k, "t": float(t), **state.energies(), **forces}
             record.update(
                 am_iterations=step.iterations,
@@ -316,7 +319,7 @@ def _run_locked(
                 refinements=step.refinements + predicted,
                 band_refinements=step.band_refinements + predicted,
                 remeshed=remeshed,
-                mu=float(np.sqrt(estimate(state, "u", crack).sum())),
+                mu=mu,
                 nu=float(np.sqrt(estimate(state, "v", crack).sum())),
                 **state.mesh_measures(),
                 cracked_vertices=int(crack.sum()),

@@ -97,6 +97,9 @@ class StepResult:
         Number of mesh refinements during the step.
     band_refinements
         Those of them that resolved the crack band (:class:`ngat.band.CrackBand`).
+    mu
+        μ_j(u^n, v^{n−1}) of the last u-step, the value Algorithm 2 tests against TOL (``None``
+        if the iteration did not estimate it: ``adapt`` ``fixed`` or ``after``).
     history
         One entry per refinement: iteration, half-step, elements, estimator before refining.
     energies
@@ -135,6 +138,7 @@ class StepResult:
     change: float = np.inf
     refinements: int = 0
     band_refinements: int = 0
+    mu: float | None = None
     history: list[dict] = field(default_factory=list)
     energies: list[float] = field(default_factory=list)
     energy_increases: int = 0
@@ -247,7 +251,10 @@ def _half_step(
             half_steps.prepare_u()  # a_j(v^n) factorises while ν and the rest are computed
         if adaptivity.adapt not in ("paper", "band"):
             return
-        if not _refine_by(state, [estimate(state, stage, crack)], adaptivity, result, stage):
+        indicators = estimate(state, stage, crack)
+        if stage == "u":
+            result.mu = float(np.sqrt(indicators.sum()))
+        if not _refine_by(state, [indicators], adaptivity, result, stage):
             return
 
 

@@ -87,6 +87,31 @@ def test_quick_run_refines_only_near_tips_and_cracks(quick_run):
     assert arrays.diameter.max() > 0.3
 
 
+def test_a_steps_mu_is_that_of_its_last_u_step(tmp_path):
+    # Algorithm 2 tests μ_j(u^n, v^{n−1}) after every u-step; a step's record keeps the last
+    # one (not μ of the final pair, which would cost another evaluation per step).
+    from ngat.driver import run
+    from ngat.minimization import estimate
+
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(
+        overrides={"adapt": "paper", "maxh": 0.5, "floor": 0.1, "tol": 0.5, "resolve_eps": False}
+    )
+    after_u = []
+
+    def monitor(stage, state):
+        if stage == "u":
+            after_u.append(float(np.sqrt(estimate(state, "u", state.crack_set()).sum())))
+
+    last = []  # μ after the last u-step of each load step
+    times = np.array([0.0, 0.6, 1.0])
+    records = run(
+        scene, parameters, times, tmp_path, lambda record: last.append(after_u[-1]), monitor
+    ).records
+    assert [r["mu"] for r in records] == last
+    assert all(0 < r["mu"] <= 0.5 for r in records[1:])
+
+
 def test_refinement_variants_after_and_fixed(tmp_path):
     # "after" refines only once the alternating minimisation has converged, and leaves the
     # estimators at or below TOL on the elements above the floor; "fixed" never refines.
