@@ -430,7 +430,7 @@ class HalfStepSolvers:
         """
         state, operators = self.state, self.operators
         if "a_factored" in saved:
-            operators.a_matrix.AsVector().FV().NumPy()[:] = saved["a_factored"]
+            operators.set_a_values(saved["a_factored"])
             self._a_solver = LaggedCholesky(
                 operators.a_matrix, ~state.dirichlet, self.max_cg, ordering=operators.ordering
             )

@@ -103,6 +103,31 @@ def test_half_steps_count_every_cg_solve():
     assert steps.statistics.cg_not_converged == 0
 
 
+def test_a_j_is_written_once_for_the_same_u_and_v(monkeypatch):
+    # A load step's reaction forces ask for the a_j its last v-step assembled already.
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"eps": 0.2})
+    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.0)
+    operators = LumpedOperators(state)
+    written = operators.a_matrix.AsVector().FV().NumPy()
+    computed, real = [], operators.u_matrix_values
+    monkeypatch.setattr(operators, "u_matrix_values", lambda v=None: computed.append(v) or real(v))
+    operators.assemble_a()
+    operators.reaction_forces()
+    assert len(computed) == 1
+    state.v_values[:] = 0.5
+    operators.assemble_a()
+    assert len(computed) == 2 and np.array_equal(written, real())
+    operators.assemble_a(np.full(state.arrays.nv, 0.25))  # another v: computed
+    state.u_values[:] *= 2  # another u: computed (an energy split's a_j depends on u)
+    operators.assemble_a()
+    assert len(computed) == 4 and np.array_equal(written, real())
+    operators.set_a_values(np.zeros_like(written))  # a restored factorisation's values
+    operators.assemble_a()
+    assert len(computed) == 5 and np.array_equal(written, real())
+
+
 def test_invalid_linear_solver_is_named():
     with pytest.raises(ParameterError, match="linear_solver.*'gmres'"):
         Parameters().replace(linear_solver="gmres")
