@@ -101,7 +101,11 @@ MAX_ROUNDS = 40
 
 
 def mesh_geometry(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Return the vertex coordinates and element vertex numbers of a triangle mesh."""
+    """Return the vertex coordinates and element vertex numbers of a triangle mesh.
+
+    The coordinates are a view of Netgen's memory, valid while the mesh lives and is not
+    refined (:class:`ngat.forms.MeshArrays` keeps a copy).
+    """
     ngmesh = mesh.ngmesh
     elements = ngmesh.Elements2D().NumPy()["nodes"][:, :3].astype(np.int64) - 1
     return ngmesh.Coordinates()[:, :2], elements

@@ -181,13 +181,14 @@ def test_a_grid_kept_for_its_mesh_writes_the_bytes_of_a_new_one(tmp_path):
     import ngsolve
     from netgen.geom2d import unit_square
 
-    from ngat.band import mesh_geometry
+    from ngat.forms import MeshArrays
     from ngat.output import vtu_grid, write_grid
 
-    geometry = mesh_geometry(ngsolve.Mesh(unit_square.GenerateMesh(maxh=0.2)))
-    kept = vtu_grid(*geometry)
+    # MeshArrays copies the coordinates: a temporary mesh's own would be freed with it.
+    arrays = MeshArrays(ngsolve.Mesh(unit_square.GenerateMesh(maxh=0.2)))
+    kept = vtu_grid(arrays.coords, arrays.elements)
     for step in range(3):
-        values = {"v": np.linspace(0, step + 1, len(geometry[0]))}
+        values = {"v": np.linspace(0, step + 1, len(arrays.coords))}
         write_grid(tmp_path / "kept.vtu", kept, values)
-        write_grid(tmp_path / "new.vtu", vtu_grid(*geometry), values)
+        write_grid(tmp_path / "new.vtu", vtu_grid(arrays.coords, arrays.elements), values)
         assert (tmp_path / "kept.vtu").read_bytes() == (tmp_path / "new.vtu").read_bytes()
