@@ -189,6 +189,25 @@ def test_row_sums_vertex_means_and_centroids_are_numpys_to_the_last_bit():
     np.testing.assert_array_equal(arrays.centroid, centroid)
 
 
+def test_the_stiffness_product_sums_as_the_element_scatter_to_the_last_bit():
+    # a_j's values come from a product with the stiffness by element; its sums must be those of
+    # the bincount scatter of any other element matrices (the runs' repeatability, and
+    # weighted_values' promise of a_values' bits), on a scalar and on a vector space.
+    from ngat.elasticity import elasticity
+    from ngat.forms import graph_matrix
+
+    arrays = MeshArrays(load_scene("two-slits").make_mesh(0.3))
+    rng = np.random.default_rng(5)
+    coefficient = rng.random(arrays.ne) * 10.0 ** rng.integers(-6, 2, arrays.ne)
+    plane = elasticity("plane_strain", poisson=0.3)
+    for components, stiffness in ((1, arrays.stiffness), (2, plane.element_stiffness(arrays))):
+        matrix = graph_matrix(arrays, components)
+        assembler = LumpedAssembler(arrays, matrix, True, components, stiffness)
+        by_product = assembler._scatter(coefficient)
+        np.testing.assert_array_equal(by_product, assembler._scatter(coefficient, stiffness))
+        assert np.abs(by_product).max() > 0
+
+
 def test_recalled_element_quantities_are_those_of_the_current_values():
     # MeshArrays keeps |∇w|², ∇w and P_j(w²) of recent nodal values: asked again with equal
     # values it returns the same numbers (read-only), with changed values new ones.
