@@ -69,9 +69,9 @@ class LumpedOperators:
                 self.a_matrix = graph_matrix(arrays, density.components)
             self.assembler = LumpedAssembler(
                 arrays, self.a_matrix, model.lumping,
-                density.components, density.element_stiffness(arrays),
+                density.components, density.element_stiffness(arrays), density.parts(arrays),
             )  # fmt: skip
-            self.stiffness_parts = density.parts(arrays)
+            self.stiffness_parts = self.assembler.parts
             self._a_inputs: tuple[np.ndarray, ...] | None = None  # (v, u) of a_matrix's values
             if density.components == 1:
                 self.b_assembler = self.assembler
@@ -92,7 +92,7 @@ class LumpedOperators:
         state = self.state
         c = state.functional.coefficient(self.arrays, state.v_values if v is None else v)
         weights = state.functional.u_step_weights(self.arrays, state.u_values, c)
-        return self.assembler.weighted_values(weights, self.stiffness_parts)
+        return self.assembler.weighted_values(weights)
 
     def assemble_a(self, v: np.ndarray | None = None) -> None:
         """Write a_j(v; ·, ·) at the current fields (or at ``v``) into ``a_matrix``, in place.

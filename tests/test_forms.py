@@ -175,7 +175,7 @@ def test_unique_keys_is_numpys_unique_with_inverse():
     np.testing.assert_array_equal(order, np.argsort(inverse, kind="stable"))
 
 
-def test_row_sums_vertex_means_and_centroids_are_numpys_to_the_last_bit():
+def test_row_sums_vertex_means_sums_and_centroids_are_numpys_to_the_last_bit():
     # The fast paths promise the same numbers as numpy's reductions, which the runs' bit-for-bit
     # repeatability (checkpoints, the stored regression values) relies on.
     rng = np.random.default_rng(4)
@@ -185,14 +185,19 @@ def test_row_sums_vertex_means_and_centroids_are_numpys_to_the_last_bit():
     arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
     v = rng.random(arrays.nv)
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
+    weights = rng.random(arrays.ne) * 10.0 ** rng.integers(-8, 8, arrays.ne)
+    repeated = np.bincount(arrays.elements.ravel(), np.repeat(weights, 3), minlength=arrays.nv)
+    np.testing.assert_array_equal(arrays.vertex_sum(weights), repeated)
     centroid = arrays.coords[arrays.elements].mean(axis=1)
     np.testing.assert_array_equal(arrays.centroid, centroid)
 
 
-def test_the_stiffness_product_sums_as_the_element_scatter_to_the_last_bit():
-    # a_j's values come from a product with the stiffness by element; its sums must be those of
-    # the bincount scatter of any other element matrices (the runs' repeatability, and
-    # weighted_values' promise of a_values' bits), on a scalar and on a vector space.
+def test_element_sums_are_the_scatter_of_the_element_matrices_to_the_last_bit():
+    # a_j's and b_j's values come from products with per-mesh matrices of the element matrices;
+    # their sums must be those of scattering c_T K_T with bincount (the order in which every
+    # earlier release summed, which the stored regression values and the runs' repeatability
+    # rely on), on a scalar and on a vector space, with a part given for every element or one
+    # for all.
     from ngat.elasticity import elasticity
     from ngat.forms import graph_matrix
 
@@ -200,12 +205,22 @@ def test_the_stiffness_product_sums_as_the_element_scatter_to_the_last_bit():
     rng = np.random.default_rng(5)
     coefficient = rng.random(arrays.ne) * 10.0 ** rng.integers(-6, 2, arrays.ne)
     plane = elasticity("plane_strain", poisson=0.3)
-    for components, stiffness in ((1, arrays.stiffness), (2, plane.element_stiffness(arrays))):
+    consistent = ((np.ones((3, 3)) + np.eye(3)) / 12)[None]
+    cases = ((1, arrays.stiffness, consistent), (2, plane.element_stiffness(arrays), None))
+    for components, stiffness, shared in cases:
         matrix = graph_matrix(arrays, components)
         assembler = LumpedAssembler(arrays, matrix, True, components, stiffness)
-        by_product = assembler._scatter(coefficient)
-        np.testing.assert_array_equal(by_product, assembler._scatter(coefficient, stiffness))
-        assert np.abs(by_product).max() > 0
+        for local in (stiffness, shared) if shared is not None else (stiffness,):
+            products = coefficient[:, None, None] * local
+            scattered = np.bincount(
+                assembler.position, weights=products.ravel(), minlength=assembler.nnz
+            )
+            summed = assembler.element_sum(local) @ coefficient
+            np.testing.assert_array_equal(summed, scattered)
+            assert np.abs(summed).max() > 0
+        np.testing.assert_array_equal(
+            assembler.weighted_values([coefficient]), assembler.element_sum(stiffness) @ coefficient
+        )
 
 
 def test_recalled_element_quantities_are_those_of_the_current_values():
