@@ -57,9 +57,11 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
     Returns
     -------
     np.ndarray
-        (nv,) int labels: the component of each vertex of the set, ``-1`` outside it.
+        (nv,) int labels (read-only): the component of each vertex of the set, ``-1`` outside
+        it. Kept for the mesh's last sets: a load step's test of the sound set before any
+        crack asks for the same set as the step before (3.6 ms at 21k elements).
     """
-    return _components(arrays.edges, mask)
+    return arrays.recall("components", mask, lambda m: _components(arrays.edges, m))
 
 
 def _components(edges: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -503,6 +503,10 @@ class MeshArrays:
         """
         return self._incidence @ weights
 
+    def recall(self, name: str, values: np.ndarray, compute) -> np.ndarray:
+        """Return ``compute(values)``, kept for equal values on this mesh (:class:`Recall`)."""
+        return self._recall(name, values, compute)
+
     def vertex_mean(self, values: np.ndarray) -> np.ndarray:
         """Return the mean of nodal values over each element's vertices: ∫_T P_j f / |T|.
 

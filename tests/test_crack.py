@@ -54,6 +54,20 @@ def test_components_never_cross_a_slit(two_slits):
     assert np.all(labels[~strip] == -1)
 
 
+def test_components_of_a_set_asked_again_are_recalled_and_a_new_set_is_labelled_anew(two_slits):
+    # A load step tests the sound set for a break: before any crack it is the whole mesh at
+    # every step, and is labelled once; a set that changed must not get the old labels.
+    arrays, _ = two_slits
+    x, y = arrays.coords.T
+    whole = np.ones(arrays.nv, dtype=bool)
+    first = components(arrays, whole)
+    assert components(arrays, whole.copy()) is first and not first.flags.writeable
+    cut = ~((np.abs(x - 3) < 0.3) & (y > -1))  # a vertical channel through the whole body
+    labels = components(arrays, cut)
+    assert len(np.unique(first)) == 1 and len(np.unique(labels[cut])) == 2
+    assert np.all(labels[~cut] == -1)
+
+
 def test_intact_body_has_the_slit_tips_and_connects(two_slits):
     arrays, regions = two_slits
     v = np.ones(arrays.nv)
