@@ -11,6 +11,7 @@ from ngat.forms import (
     MeshArrays,
     a_form,
     b_form,
+    element_diameters,
     exact_dx,
     lumped_dx,
     row_sum,
@@ -175,7 +176,7 @@ def test_unique_keys_is_numpys_unique_with_inverse():
     np.testing.assert_array_equal(order, np.argsort(inverse, kind="stable"))
 
 
-def test_row_sums_vertex_means_sums_and_centroids_are_numpys_to_the_last_bit():
+def test_row_sums_vertex_means_sums_centroids_and_diameters_are_numpys_to_the_last_bit():
     # The fast paths promise the same numbers as numpy's reductions, which the runs' bit-for-bit
     # repeatability (checkpoints, the stored regression values) relies on.
     rng = np.random.default_rng(4)
@@ -185,6 +186,9 @@ def test_row_sums_vertex_means_sums_and_centroids_are_numpys_to_the_last_bit():
     arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
     v = rng.random(arrays.nv)
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
+    corners = arrays.coords[arrays.elements]
+    longest = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2).max(axis=1)
+    np.testing.assert_array_equal(element_diameters(arrays.coords, arrays.elements), longest)
     weights = rng.random(arrays.ne) * 10.0 ** rng.integers(-8, 8, arrays.ne)
     repeated = np.bincount(arrays.elements.ravel(), np.repeat(weights, 3), minlength=arrays.nv)
     np.testing.assert_array_equal(arrays.vertex_sum(weights), repeated)
