@@ -268,6 +268,31 @@ def test_held_cholesky_does_not_hold_the_decoupled_crack():
     assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-10 * scale
 
 
+def test_b_j_decouples_the_crack_it_is_given_each_time():
+    # A grown crack, and the old one again, must each decouple their own rows and columns
+    # and leave every other entry at b_j's value.
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"eps": 0.2})
+    state = ATState(scene.make_mesh(0.25), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.4)
+    HalfStepSolvers(state).solve_u()
+    operators = LumpedOperators(state)
+    nearest = np.argsort(np.linalg.norm(state.arrays.coords - (2.0, 2.0), axis=1))
+    small, grown = (np.isin(np.arange(state.arrays.nv), nearest[:k]) for k in (10, 40))
+    operators.assemble_b()
+    whole = operators.b_matrix.AsVector().FV().NumPy().copy()
+    _, columns, rowptr = operators.b_matrix.CSR()
+    rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(np.asarray(rowptr, dtype=np.int64)))
+    columns = np.asarray(columns, dtype=np.int64)
+    for crack in (small, grown, small):
+        operators.assemble_b(crack)
+        values = operators.b_matrix.AsVector().FV().NumPy()
+        # Zero off the diagonal in the crack's rows and columns, b_j's own values elsewhere.
+        decoupled = (crack[rows] | crack[columns]) & (rows != columns)
+        assert np.all(values[decoupled] == 0.0) and np.any(whole[decoupled] != 0.0)
+        np.testing.assert_array_equal(values[~decoupled], whole[~decoupled])
+
+
 def _half_step_fields(prepare: bool, perturb: bool = False):
     """(u, v) after three alternating iterations on a fixed mesh, with or without prepare."""
     scene = load_scene("two-slits")
