@@ -67,10 +67,12 @@ class LumpedOperators:
                 self.a_matrix = self.b_matrix.CreateMatrix()
             else:
                 self.a_matrix = graph_matrix(arrays, density.components)
+            # Without a split the one part is the stiffness: one array, one product matrix.
+            parts = density.parts(arrays)
+            stiffness = parts[0] if len(parts) == 1 else density.element_stiffness(arrays)
             self.assembler = LumpedAssembler(
-                arrays, self.a_matrix, model.lumping,
-                density.components, density.element_stiffness(arrays), density.parts(arrays),
-            )  # fmt: skip
+                arrays, self.a_matrix, model.lumping, density.components, stiffness, parts
+            )
             self.stiffness_parts = self.assembler.parts
             self._a_inputs: tuple[np.ndarray, ...] | None = None  # (v, u) of a_matrix's values
             if density.components == 1:
