@@ -176,7 +176,7 @@ def test_unique_keys_is_numpys_unique_with_inverse():
     np.testing.assert_array_equal(order, np.argsort(inverse, kind="stable"))
 
 
-def test_row_sums_vertex_means_sums_centroids_and_diameters_are_numpys_to_the_last_bit():
+def test_row_sums_vertex_means_stiffness_sums_centroids_and_diameters_are_numpys_to_the_last_bit():
     # The fast paths promise the same numbers as numpy's reductions, which the runs' bit-for-bit
     # repeatability (checkpoints, the stored regression values) relies on.
     rng = np.random.default_rng(4)
@@ -186,6 +186,9 @@ def test_row_sums_vertex_means_sums_centroids_and_diameters_are_numpys_to_the_la
     arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
     v = rng.random(arrays.nv) * 10.0 ** rng.integers(-8, 8, arrays.nv)  # rounding order shows
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
+    grad_phi = arrays.grad_phi
+    stiffness = arrays.area[:, None, None] * np.einsum("eak,ebk->eab", grad_phi, grad_phi)
+    np.testing.assert_array_equal(arrays.stiffness, stiffness)
     corners = arrays.coords[arrays.elements]
     longest = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2).max(axis=1)
     np.testing.assert_array_equal(element_diameters(arrays.coords, arrays.elements), longest)
