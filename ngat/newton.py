@@ -177,6 +177,11 @@ class NewtonSolver:
                 np.copyto(out, self.nnz, where=above)
         self.diagonal = (first + components[:, None] * degree[None] + graph.diagonal[None]).ravel()
         self._local = np.empty(len(self.position))
+        self._blocks = (
+            self._local[sizes[0] : sizes[1]].reshape(ne, 3 * c, 3 * c),
+            self._local[sizes[1] : sizes[2]].reshape(ne, 3, 3),
+            self._local[sizes[2] : sizes[3]].reshape(ne, 3, 3 * c),
+        )
         self.inverse = None
         self.certified = 0.0
         self.rhs = self.matrix.CreateColVector()
@@ -186,10 +191,9 @@ class NewtonSolver:
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the values of ∇²I_j at (u, v) on and below the diagonal, in the graph's order."""
         state = self.state
-        uu, vv, vu = state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts)
         # Into one buffer per mesh: a new array of this size costs its page faults every time.
-        local = np.concatenate([uu.ravel(), vv.ravel(), vu.ravel()], out=self._local)
-        return np.bincount(self.position, weights=local, minlength=self.nnz + 1)[: self.nnz]
+        state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts, self._blocks)
+        return np.bincount(self.position, weights=self._local, minlength=self.nnz + 1)[: self.nnz]
 
     def _factorise(self, crack: np.ndarray) -> tuple:
         """Assemble and factorise the projected Hessian at the state's (u, v).
