@@ -28,20 +28,38 @@ wall median/min/max, the iterations that started on a new mesh and their seconds
 ‖v^n − v^{n−1}‖_∞, I_j after the v-step) and ``trace.png`` (the trace against the
 iteration). Run ``python scripts/bench_break_step.py`` (the paper's example, about 11 s for the
 checkpoint and 20 s per repeat on two cores) or ``--quick`` (the scene's quick variant).
+``--seed S`` perturbs every repeat's copy with seed S (0: none).
+
+Comparison: the machine's speed drifts by a third or more within an hour, so two versions
+measured one script run after the other differ by the hour as much as by the code.
+``--against REV`` resumes the step for every draw (the unperturbed one and ``--samples``
+perturbed ones) with the current tree and with REV, one after the other, the order flipping
+from draw to draw (a worktree of REV, removed at the end, as in ``bench_paper.py``). Each run
+is this script's one-draw mode (``--repeats 1 --seed S``) in a process of its own with
+``PYTHONPATH`` at the checkout's root, with a checkpoint of that checkout's own history, made
+anew, in ``--out``/current or ``--out``/against. Output: ``compare.md`` (also printed) and
+``compare.json``: each draw's iterations, linear solves, I_j after, elements and wall on both
+sides, their medians, and the ratio current/REV of the median walls and of each draw's.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import json
+import os
 import shutil
+import signal
 import statistics
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+import ngat
 from ngat.driver import run
 from ngat.experiment import plan_run
 from ngat.output import OutputError
@@ -197,6 +215,109 @@ def draw_trace(trace: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
 
 
+def _bench_paper():
+    """Return ``bench_paper.py`` (its worktree, description and signal helpers), by its path."""
+    spec = importlib.util.spec_from_file_location(
+        "bench_paper", Path(__file__).with_name("bench_paper.py")
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def draw_child(root: Path, words: list[str], out: Path) -> dict:
+    """Return one draw run by this script in a process with only ``root`` on PYTHONPATH."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--repeats", "1", "--out", str(out)]
+    environment = {**os.environ, "PYTHONPATH": str(root)}
+    done = subprocess.run(
+        [*command, *words], env=environment, stdout=subprocess.DEVNULL, check=False
+    )
+    if done.returncode:
+        raise SystemExit(f"the break step in {root} failed with exit status {done.returncode}")
+    bench = json.loads((out / "bench.json").read_text())
+    if not Path(bench["ngat"]).is_relative_to(root.resolve()):
+        raise SystemExit(f"the run for {root} imported ngat from {bench['ngat']}")
+    return {name: bench[name] for name in [*OUTCOME, "iterations_on_a_new_mesh"]} | {
+        "wall_s": bench["wall_s"]["each"][0]
+    }
+
+
+def compare(revision: str, samples: int, words: list[str], out: Path) -> dict:
+    """Resume the step for each draw with the current tree and with ``revision``, alternating."""
+    checkouts = _bench_paper()
+    signal.signal(signal.SIGTERM, checkouts.stop)
+    labels = {"current": checkouts.describe(None), "against": checkouts.describe(revision)}
+    draws = []
+    for name in labels:  # each side's checkpoint made anew by its own code
+        shutil.rmtree(out / name, ignore_errors=True)
+    with checkouts.worktree(revision) as checkout:
+        roots = {"current": checkouts.ROOT, "against": checkout}
+        for seed in range(samples + 1):
+            draw: dict = {"seed": seed}
+            for name in ("current", "against")[:: 1 if seed % 2 == 0 else -1]:
+                draw[name] = draw_child(roots[name], [*words, "--seed", str(seed)], out / name)
+                print(f"draw {seed} {labels[name]}: {draw[name]['wall_s']} s")
+            draws.append(draw)
+    median = {
+        name: {key: statistics.median(d[name][key] for d in draws) for key in draws[0][name]}
+        for name in ("current", "against")
+    }
+    comparison = {
+        "against": revision, "variant": words, "labels": labels, "draws": draws,
+        "median": median,
+        "wall_ratio": round(median["current"]["wall_s"] / median["against"]["wall_s"], 3),
+        "draw_ratios": [round(d["current"]["wall_s"] / d["against"]["wall_s"], 3) for d in draws],
+    }  # fmt: skip
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.json").write_text(json.dumps(comparison, indent=2))
+    markdown = compare_table(comparison)
+    (out / "compare.md").write_text(markdown + "\n")
+    print(markdown)
+    return comparison
+
+
+COLUMNS = {
+    "iterations": "{}",
+    "linear_solves": "{}",
+    "total_after": "{:.6f}",
+    "elements_after": "{:,}",
+    "iterations_on_a_new_mesh": "{}",
+    "wall_s": "{:.1f}",
+}
+"""The figures of a draw in :func:`compare_table`, with their format."""
+
+
+def compare_table(comparison: dict) -> str:
+    """Return the Markdown table of :func:`compare`: current / REV in every cell."""
+
+    def cell(value, form: str) -> str:
+        whole = isinstance(value, float) and value.is_integer() and form != "{:.6f}"
+        return form.format(int(value) if whole else value)
+
+    def cells(row: dict) -> str:
+        return " | ".join(
+            f"{cell(row['current'][key], form)} / {cell(row['against'][key], form)}"
+            for key, form in COLUMNS.items()
+        )
+
+    labels = comparison["labels"]
+    lines = [
+        f"{' '.join(comparison['variant'])}: the break step, {labels['current']} / "
+        f"{labels['against']} in each cell, alternating draw by draw (draw 0 unperturbed).",
+        "",
+        "| draw | iterations | linear solves | I_j after | elements | iterations on a new "
+        "mesh | wall [s] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    lines += [f"| {d['seed']} | {cells(d)} |" for d in comparison["draws"]]
+    median = comparison["median"]
+    lines.append(f"| median | {cells(median)} |")
+    ratios = ", ".join(f"{r:.3f}" for r in comparison["draw_ratios"])
+    lines += ["", f"Median wall current / {comparison['against']}: {comparison['wall_ratio']:.3f}",
+              f"Draw by draw: {ratios}"]  # fmt: skip
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="two-slits")
@@ -206,13 +327,24 @@ def main() -> None:
     parser.add_argument(
         "--samples", type=int, default=0, help="resumed runs with v perturbed at round-off level"
     )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="perturb every repeat's v with this seed (0: none)"
+    )
     parser.add_argument("--set", nargs="*", default=[], help="parameter changes, NAME=VALUE")
+    parser.add_argument(
+        "--against", metavar="REV", help="compare with this git revision, draw by draw"
+    )
     parser.add_argument("--out", type=Path, default=Path("results/bench_break_step"))
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
-    if args.samples < 0:
-        parser.error(f"--samples must be 0 or more, got {args.samples}")
+    if args.samples < 0 or args.seed < 0:
+        parser.error("--samples and --seed must be 0 or more")
+    if args.against is not None:
+        words = ["--scene", args.scene, "--at", str(args.at), *(["--quick"] * args.quick)]
+        words += ["--set", *args.set] if args.set else []
+        compare(args.against, args.samples, words, args.out)
+        return
     changes = dict(item.split("=", 1) for item in args.set) | {"checkpoint_every": "0"}
     source = args.out / "checkpoint"
     try:
@@ -221,7 +353,7 @@ def main() -> None:
         parser.error(str(error))
     before = read_records(source / "energies.csv")[-1]
     results = [
-        break_step(args.scene, args.quick, changes, source, args.out / "resumed", k)
+        break_step(args.scene, args.quick, changes, source, args.out / "resumed", k, args.seed)
         for _ in range(args.repeats)
     ]
     draws = [
@@ -233,6 +365,7 @@ def main() -> None:
     on_new_mesh, new_mesh_seconds = new_mesh_iterations(trace)
     bench = {
         "scene": args.scene, "quick": args.quick, "at": args.at, "changes": changes,
+        "seed": args.seed, "ngat": str(Path(ngat.__file__).parent),
         **outcome(record),
         "newton_steps": record["newton_steps"], "escapes": record["escapes"],
         "refinements": record["refinements"],

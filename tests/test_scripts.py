@@ -179,3 +179,35 @@ def test_bench_break_step_refuses_a_time_that_is_not_a_load_time(tmp_path):
     )  # fmt: skip
     assert done.returncode == 2
     assert "--at 1.37 is not a load time of the scene" in done.stderr
+
+
+def test_bench_break_step_against_the_same_revision(tmp_path):
+    # HEAD against HEAD, draw by draw: the same code on both sides, each from a checkpoint of
+    # its own, so every draw's iterations, solves, I_j and elements agree, and the ratios are
+    # those of the walls reported.
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
+            "--at", "1.35", "--samples", "1", "--against", "HEAD", "--out", str(tmp_path),
+        ],
+        check=True, capture_output=True, timeout=600,
+    )  # fmt: skip
+    comparison = json.loads((tmp_path / "compare.json").read_text())
+    assert [d["seed"] for d in comparison["draws"]] == [0, 1]
+    for draw in comparison["draws"]:
+        current, against = draw["current"], draw["against"]
+        assert current["iterations"] > 1 and current["elements_after"] > 0
+        assert {k: v for k, v in current.items() if k != "wall_s"} == {
+            k: v for k, v in against.items() if k != "wall_s"
+        }
+    ratios = [
+        round(d["current"]["wall_s"] / d["against"]["wall_s"], 3) for d in comparison["draws"]
+    ]
+    assert comparison["draw_ratios"] == ratios
+    markdown = (tmp_path / "compare.md").read_text()
+    assert markdown.startswith("--scene two-slits --at 1.35 --quick: the break step")
+    assert f"Draw by draw: {ratios[0]:.3f}, {ratios[1]:.3f}" in markdown
+    worktrees = subprocess.run(
+        ["git", "-C", str(ROOT), "worktree", "list"], capture_output=True, text=True, check=True
+    )
+    assert "bench-against-" not in worktrees.stdout
