@@ -124,9 +124,11 @@ class LumpedFunctional:
         u: np.ndarray,
         v: np.ndarray,
         parts: list[np.ndarray],
-        out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        out: tuple[np.ndarray, np.ndarray, np.ndarray],
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return the element blocks of ∇²I_j at (u, v): uu, vv and vu (row v_a, column u_b).
+        """Write the element blocks of ∇²I_j at (u, v) into ``out`` and return them.
+
+        The blocks are uu, vv and vu (row v_a, column u_b).
 
         Parameters
         ----------
@@ -137,16 +139,12 @@ class LumpedFunctional:
         parts
             The element matrices of a_j's parts (:meth:`ngat.elasticity.Elasticity.parts`).
         out
-            Arrays of the three blocks' shapes to write them into (:class:`ngat.newton.
-            NewtonSolver` keeps one buffer per mesh: new arrays of this size cost their page
-            faults at every step); default new ones.
+            Arrays of shapes (ne, 3c, 3c), (ne, 3, 3) and (ne, 3, 3c) for the c components of
+            u: views of the one buffer per mesh of :class:`ngat.newton.NewtonSolver`, which
+            scatters it as it is.
         """
         model, density = self.model, self.density
         el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
-        c = density.components
-        if out is None:
-            out = (np.empty((arrays.ne, 3 * c, 3 * c)), np.empty_like(stiffness),
-                   np.empty((arrays.ne, 3, 3 * c)))  # fmt: skip
         uu, vv, vu = out
         flux = density.fluxes(density.gradient(arrays, u))[0]
         weights = self.u_step_weights(arrays, u, arrays.square_mean(v) + model.eta)
