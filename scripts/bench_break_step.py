@@ -258,8 +258,8 @@ def compare(revision: str, samples: int, words: list[str], out: Path) -> dict:
                 draw[name] = draw_child(roots[name], [*words, "--seed", str(seed)], out / name)
                 print(f"draw {seed} {labels[name]}: {draw[name]['wall_s']} s")
             draws.append(draw)
-    median = {
-        name: {key: statistics.median(d[name][key] for d in draws) for key in draws[0][name]}
+    median = {  # the middle draw's figure (the lower of two: a value some draw had)
+        name: {key: statistics.median_low(d[name][key] for d in draws) for key in draws[0][name]}
         for name in ("current", "against")
     }
     comparison = {
@@ -290,13 +290,9 @@ COLUMNS = {
 def compare_table(comparison: dict) -> str:
     """Return the Markdown table of :func:`compare`: current / REV in every cell."""
 
-    def cell(value, form: str) -> str:
-        whole = isinstance(value, float) and value.is_integer() and form != "{:.6f}"
-        return form.format(int(value) if whole else value)
-
     def cells(row: dict) -> str:
         return " | ".join(
-            f"{cell(row['current'][key], form)} / {cell(row['against'][key], form)}"
+            f"{form.format(row['current'][key])} / {form.format(row['against'][key])}"
             for key, form in COLUMNS.items()
         )
 

@@ -125,17 +125,21 @@ def test_stability_judges_the_broken_body_against_the_reference():
     assert judged["broken_energy_error_%"] == 3.6
 
 
+def bench_break_step(*arguments: str, check: bool = True) -> subprocess.CompletedProcess:
+    """Run ``scripts/bench_break_step.py --quick`` (at t = 1.35 unless ``--at`` is given)."""
+    at = [] if "--at" in arguments else ["--at", "1.35"]
+    script = str(ROOT / "scripts" / "bench_break_step.py")
+    return subprocess.run(
+        [sys.executable, script, "--quick", *at, *arguments],
+        check=check, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+
+
 def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
     # A cheap step of the quick variant (t = 1.35, 19 iterations, two new meshes) stands for
     # the break step: resumed twice from the checkpoint of t = 1.30, it must repeat the
     # uninterrupted run's step to the last bit, and the trace must hold its iterations.
-    subprocess.run(
-        [
-            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
-            "--at", "1.35", "--repeats", "2", "--samples", "1", "--out", str(tmp_path),
-        ],
-        check=True, capture_output=True, timeout=300,
-    )  # fmt: skip
+    bench_break_step("--repeats", "2", "--samples", "1", "--out", str(tmp_path))
     bench = json.loads((tmp_path / "bench.json").read_text())
     result, _, _ = quick_run
     (step,) = [r for r in result.records if abs(r["t"] - 1.35) < 1e-9]
@@ -170,13 +174,7 @@ def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
 
 
 def test_bench_break_step_refuses_a_time_that_is_not_a_load_time(tmp_path):
-    done = subprocess.run(
-        [
-            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
-            "--at", "1.37", "--out", str(tmp_path),
-        ],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+    done = bench_break_step("--at", "1.37", "--out", str(tmp_path), check=False)
     assert done.returncode == 2
     assert "--at 1.37 is not a load time of the scene" in done.stderr
 
@@ -185,13 +183,7 @@ def test_bench_break_step_against_the_same_revision(tmp_path):
     # HEAD against HEAD, draw by draw: the same code on both sides, each from a checkpoint of
     # its own, so every draw's iterations, solves, I_j and elements agree, and the ratios are
     # those of the walls reported.
-    subprocess.run(
-        [
-            sys.executable, str(ROOT / "scripts" / "bench_break_step.py"), "--quick",
-            "--at", "1.35", "--samples", "1", "--against", "HEAD", "--out", str(tmp_path),
-        ],
-        check=True, capture_output=True, timeout=600,
-    )  # fmt: skip
+    bench_break_step("--samples", "1", "--against", "HEAD", "--out", str(tmp_path))
     comparison = json.loads((tmp_path / "compare.json").read_text())
     assert [d["seed"] for d in comparison["draws"]] == [0, 1]
     for draw in comparison["draws"]:
