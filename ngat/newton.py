@@ -29,10 +29,9 @@ import logging
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
 
-from ngat.forms import sparse_from_coo
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError
-from ngat.pardiso import sparse_inverse
+from ngat.pardiso import symmetric_factor
 from ngat.state import ATState
 
 __all__ = ["NewtonSolver"]
@@ -81,6 +80,10 @@ class NewtonSolver:
     curvature_solves : int
         Further solves with a factorisation already computed, in the search for negative
         curvature (:meth:`negative_curvature`), since the last :meth:`restart`.
+    values : numpy.ndarray or None
+        The projected Hessian as last factorised: its entries on and above the diagonal at
+        ``entry_rows``, ``entry_cols`` (``None`` if one was not finite: the solves then give
+        NaN and the step is rejected).
     """
 
     def __init__(
@@ -106,24 +109,27 @@ class NewtonSolver:
         self.certified = 0.0
         self.solves = 0
         self.curvature_solves = 0
+        self.factor = self.values = None
         self._arrays = None
 
     def _setup(self) -> None:
-        """Build the lower triangle's graph, the scatter positions and the work vectors.
+        """Build the upper triangle's graph, the scatter positions and the work arrays.
 
         The Hessian couples, on each element, the DOFs of u (``element_dofs`` of the model: c
         components, component-major) and of v (behind u's): every one of its (c + 1)² blocks has
         the graph G of the P1 space, whose positions of the element couplings the assembler of
-        b_j already holds (:class:`ngat.operators.LumpedOperators`). Both factorisations
-        (:func:`ngat.pardiso.sparse_inverse`) read the entries on and below the diagonal only,
-        so the matrix stores just those: of block row I, the blocks J < I whole and the lower
-        part L of G in block I (half the entries to assemble and copy; the same factorisation to
-        the last bit with NGSolve's, ``tests/test_solvers.py``). Its rows are sorted, and in a
-        sorted row a of G the columns b ≤ a come first, so row (I, a) starts at Σ_{I' < I} (I'
-        nnz(G) + nnz(L)) + I rowptr_G[a] + rowptr_L[a] and holds column (J, b) at J deg(a) + the
-        position of b in row a of G: each local entry's position follows by that arithmetic,
-        without a search. The local entries above the diagonal go to a discarded slot behind the
-        matrix.
+        b_j already holds (:class:`ngat.operators.LumpedOperators`). PARDISO reads the entries on
+        and above the diagonal in CSR (:class:`ngat.pardiso.Pardiso`), so the graph is built as
+        just that, without a sparse matrix to extract it from (at 84k DOFs NGSolve's COO
+        constructor and the extraction took 27–48 and 29–47 ms per mesh). Row (I, a) holds, in
+        block I, the part U_a of row a of G from a on, then row a of G whole in each block
+        J > I: sorted, as the rows of G are. Its entry (J, b) lies behind the row's start by
+        the position of b in U_a if J = I, by |U_a| + (J − I − 1) deg(a) + the position of b in
+        row a of G if J > I: each local entry's position follows by that arithmetic, without a
+        search. The element matrices are symmetric; their entries on and below the diagonal go
+        to the mirrored entry above it, those above to a discarded slot behind the matrix, so
+        that every entry sums the same local values in the same order as a lower triangle
+        would.
         """
         state = self.state
         arrays = state.arrays
@@ -134,31 +140,27 @@ class NewtonSolver:
         _, cols_g, rowptr_g = operators.b_matrix.CSR()
         cols_g, rowptr_g = np.asarray(cols_g, dtype=np.int64), np.asarray(rowptr_g, np.int64)
         n, degree = len(rowptr_g) - 1, np.diff(rowptr_g)
-        rows_g = np.repeat(np.arange(n), degree)
-        lower = cols_g <= rows_g
-        rowptr_l = np.concatenate([[0], np.cumsum(np.bincount(rows_g[lower], minlength=n))])
-        # Block (I, J ≤ I): G whole below the diagonal blocks, L on them.
-        blocks = [(i, j, np.s_[:] if j < i else lower) for i in range(c + 1) for j in range(i + 1)]
-        rows = np.concatenate([i * n + rows_g[part] for i, _, part in blocks])
-        self.matrix = sparse_from_coo(
-            rows,
-            np.concatenate([j * n + cols_g[part] for _, j, part in blocks]),
-            np.zeros(len(rows)),
-            (c + 1) * n,
-            (c + 1) * n,
-        )
-        _, cols, rowptr = self.matrix.CSR()
-        rowptr = np.asarray(rowptr, dtype=np.int64)
-        self.nnz = len(cols)
-        self.entry_rows = np.repeat(np.arange(len(rowptr) - 1), np.diff(rowptr))
-        self.entry_cols = np.asarray(cols, dtype=np.int64)
-        # Row (I, a), column (J ≤ I, b): first(I, a) + J deg(a) + position of (a, b) in G.
+        upper_g = rowptr_g[1:] - graph.diagonal  # |U_a|, the diagonal included
         components = np.arange(c + 1)
-        block_start = np.cumsum(np.concatenate([[0], components * graph.nnz + rowptr_l[-1]]))
-        first = block_start[:-1, None] + components[:, None] * rowptr_g[None, :-1]
-        first += (rowptr_l - rowptr_g)[None, :-1]  # (c + 1, n)
+        lengths = upper_g[None, :] + (c - components)[:, None] * degree[None, :]  # (c + 1, n)
+        self.indptr = np.concatenate([[0], np.cumsum(lengths)])
+        self.nnz = int(self.indptr[-1])
+        start = self.indptr[:-1].reshape(c + 1, n)
+        rows_g = np.repeat(np.arange(n), degree)
+        entries = np.arange(len(cols_g))
+        in_u = entries >= graph.diagonal[rows_g]
+        self.entry_cols = np.empty(self.nnz, dtype=np.int64)
+        for i in range(c + 1):
+            a, k = rows_g[in_u], entries[in_u]
+            self.entry_cols[start[i][a] + k - graph.diagonal[a]] = i * n + cols_g[in_u]
+            for j in range(i + 1, c + 1):
+                row = start[i] + upper_g + (j - i - 1) * degree - rowptr_g[:-1]
+                self.entry_cols[row[rows_g] + entries] = j * n + cols_g
+        self.entry_rows = np.repeat(np.arange((c + 1) * n), lengths.ravel())
+        self.diagonal = start.ravel()  # U_a begins with a
         el, ne = arrays.elements, arrays.ne
-        in_g, degree_el = graph.position.reshape(ne, 3, 3), degree[el]
+        # [e, i, j]: where local vertex i sits in the row of G of local vertex j.
+        mirrored = graph.position.reshape(ne, 3, 3).transpose(0, 2, 1)
         above = el[:, None, :] > el[:, :, None]  # (ne, 3, 3): b > a, above the diagonal of G
         # In hessian_blocks' order: uu (ne, I, i, J, j), vv (ne, i, j) and vu (ne, i, J, j).
         sizes = np.cumsum([0, ne * 9 * c * c, ne * 9, ne * 9 * c])
@@ -168,28 +170,29 @@ class NewtonSolver:
         local_blocks = {(i, j): uu[:, i, :, j] for i in range(c) for j in range(c)}
         local_blocks |= {(c, j): vu[:, :, j] for j in range(c)}
         local_blocks[c, c] = self.position[sizes[1] : sizes[2]].reshape(ne, 3, 3)
-        for (i, j), out in local_blocks.items():  # block row i, block column j
+        for (i, j), out in local_blocks.items():  # block row i, block column j: row (j, b)
             if j > i:
                 out[...] = self.nnz
                 continue
-            np.add((first[i][el] + j * degree_el)[:, :, None], in_g, out=out)
+            if i == j:
+                row = start[j] - graph.diagonal
+            else:
+                row = start[j] + upper_g + (i - j - 1) * degree - rowptr_g[:-1]
+            np.add(row[el][:, None, :], mirrored, out=out)
             if i == j:
                 np.copyto(out, self.nnz, where=above)
-        self.diagonal = (first + components[:, None] * degree[None] + graph.diagonal[None]).ravel()
         self._local = np.empty(len(self.position))
         self._blocks = (
             self._local[sizes[0] : sizes[1]].reshape(ne, 3 * c, 3 * c),
             self._local[sizes[1] : sizes[2]].reshape(ne, 3, 3),
             self._local[sizes[2] : sizes[3]].reshape(ne, 3, 3 * c),
         )
-        self.inverse = None
+        self.factor = None
         self.certified = 0.0
-        self.rhs = self.matrix.CreateColVector()
-        self.delta = self.matrix.CreateColVector()
         self._arrays = arrays
 
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Return the values of ∇²I_j at (u, v) on and below the diagonal, in the graph's order."""
+        """Return the values of ∇²I_j at (u, v) on and above the diagonal, in the graph's order."""
         state = self.state
         # Into one buffer per mesh: a new array of this size costs its page faults every time.
         state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts, self._blocks)
@@ -219,13 +222,18 @@ class NewtonSolver:
             values = self.hessian_values(u, v)
             values[held[self.entry_rows] | held[self.entry_cols]] = 0.0
             values[self.diagonal[held]] = 1.0
-            self.matrix.AsVector().FV().NumPy()[:] = values
+        self.values = values
         with state.timer("solve"):
-            if self.inverse is None:
+            if self.factor is None:
                 ordering = self.half_steps.operators.ordering
-                self.inverse = sparse_inverse(self.matrix, definite=False, ordering=ordering)
+                if ordering is not None:  # of the vertices: their DOFs one after the other
+                    dofs = len(ordering) * np.arange(len(held) // len(ordering))
+                    ordering = (ordering[:, None] + dofs).ravel()
+                self.factor = symmetric_factor(self.indptr, self.entry_cols, False, ordering)
+            if np.isfinite(values).all():  # else the solves give NaN and the step is rejected
+                self.factor.factorise(values)
             else:
-                self.inverse.Update()
+                self.values = None
         return u, v, upper, gradient, held
 
     def step(self, crack: np.ndarray, ceiling: float = np.inf) -> str:
@@ -298,13 +306,13 @@ class NewtonSolver:
         PARDISO's L D Lᵀ factorisation counts them (Sylvester's law of inertia): with none, no
         search can find negative curvature. NGSolve's sparse Cholesky does not count them.
         """
-        return getattr(self.inverse, "negative_eigenvalues", 1) > 0
+        return getattr(self.factor, "negative_eigenvalues", 1) > 0
 
     def _apply_inverse(self, x: np.ndarray) -> np.ndarray:
-        """Return H⁻¹ x with the current factorisation."""
-        self.rhs.FV().NumPy()[:] = x
-        self.delta.data = self.inverse * self.rhs
-        return self.delta.FV().NumPy().copy()
+        """Return H⁻¹ x with the current factorisation (NaN if H was not finite)."""
+        if self.values is None:
+            return np.full(len(x), np.nan)
+        return self.factor.solve(x)
 
     def negative_curvature(
         self, start: np.ndarray, image: np.ndarray

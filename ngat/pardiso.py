@@ -31,8 +31,12 @@ import scipy.sparse as sp
 from ngsolve import BitArray
 from ngsolve.la import BaseMatrix, BaseVector, SparseMatrixd
 
+from ngat.forms import sparse_from_coo
+
 __all__ = [
     "AVAILABLE",
+    "LowerCholesky",
+    "symmetric_factor",
     "MKL_CBWR_AUTO",
     "TWO_LEVEL",
     "Pardiso",
@@ -447,6 +451,61 @@ def background_ordering(graph: Callable[[], tuple[np.ndarray, np.ndarray]]) -> F
 def _ordering(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Return METIS's ordering of the graph of an upper triangle, computed on one thread."""
     return Pardiso(indptr, indices, definite=True, sequential=True).ordering.astype(np.int64)
+
+
+def symmetric_factor(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    definite: bool = True,
+    ordering: np.ndarray | None = None,
+) -> Pardiso | LowerCholesky:
+    """Return a factorisation of the symmetric matrices with this graph of the upper triangle.
+
+    :class:`Pardiso` with MKL, else :class:`LowerCholesky`: both take the values of the entries
+    on and above the diagonal in the CSR order of ``indptr``, ``indices`` (sorted rows) with
+    ``factorise`` and solve with ``solve``; only PARDISO counts ``negative_eigenvalues``.
+    ``ordering`` is PARDISO's (NGSolve's factorisation computes its own).
+    """
+    if AVAILABLE:
+        return Pardiso(indptr, indices, definite, ordering)
+    return LowerCholesky(indptr, indices)
+
+
+class LowerCholesky:
+    """NGSolve's sparse Cholesky factorisation (L D Lᵀ) with the interface of :class:`Pardiso`.
+
+    NGSolve's factorisation reads the entries on and below the diagonal: the matrix holds the
+    mirror of the given upper triangle, and each factorisation copies the values into it in its
+    own order (found once, by giving the constructor the entries' numbers as values).
+
+    Parameters
+    ----------
+    indptr, indices
+        CSR graph of the upper triangle, rows sorted.
+    """
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray) -> None:
+        n = len(indptr) - 1
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        numbers = np.arange(len(indices), dtype=float)
+        self.matrix = sparse_from_coo(indices, rows, numbers, n, n)
+        self._order = self.matrix.AsVector().FV().NumPy().astype(np.int64)
+        self._inverse = None
+        self._rhs, self._out = self.matrix.CreateColVector(), self.matrix.CreateColVector()
+
+    def factorise(self, values: np.ndarray) -> None:
+        """Factorise the matrix with these values of the upper triangle."""
+        self.matrix.AsVector().FV().NumPy()[:] = values[self._order]
+        if self._inverse is None:
+            self._inverse = self.matrix.Inverse(inverse="sparsecholesky")
+        else:
+            self._inverse.Update()
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Return A⁻¹ ``rhs`` with the last factorisation."""
+        self._rhs.FV().NumPy()[:] = rhs
+        self._out.data = self._inverse * self._rhs
+        return self._out.FV().NumPy().copy()
 
 
 def sparse_inverse(

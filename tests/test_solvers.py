@@ -10,6 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 import ngat.minimization
+import ngat.pardiso
 from ngat.driver import run
 from ngat.forms import sparse_from_coo
 from ngat.halfsteps import HalfStepSolvers
@@ -83,9 +84,22 @@ def test_newton_gradient_and_hessian_are_those_of_the_energy(assert_newton_match
     assert_newton_matches_ngsolve(state, u, rng.random(state.arrays.nv))
 
 
-def test_factorising_the_lower_triangle_is_factorising_the_hessian():
-    # Newton's matrix stores ∇²I_j on and below the diagonal: NGSolve's sparse Cholesky
-    # factorisation reads no more, so it must solve exactly as with the whole Hessian.
+def newton_hessian(newton: NewtonSolver) -> sp.csr_matrix:
+    """Return the whole projected Hessian Newton factorised last, from its upper triangle."""
+    size = len(newton.indptr) - 1
+    upper = sp.csr_matrix((newton.values, newton.entry_cols, newton.indptr), (size, size))
+    return upper + sp.triu(upper, k=1).T
+
+
+@pytest.mark.parametrize("mkl", [True, False])
+def test_factorising_the_upper_triangle_is_factorising_the_hessian(mkl, monkeypatch):
+    # Newton's matrix stores ∇²I_j on and above the diagonal: PARDISO reads no more, nor does
+    # NGSolve's sparse Cholesky (ngat's factorisation without MKL) of its mirror, so both must
+    # solve as with the whole Hessian.
+    if not mkl:
+        monkeypatch.setattr(ngat.pardiso, "AVAILABLE", False)
+    elif not ngat.pardiso.AVAILABLE:
+        pytest.skip("MKL is not installed")
     scene = load_scene("two-slits")
     parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
     state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
@@ -94,26 +108,16 @@ def test_factorising_the_lower_triangle_is_factorising_the_hessian():
     try:
         newton = NewtonSolver(state)
         newton._factorise(state.crack_set())
-        values = newton.matrix.AsVector().FV().NumPy()
-        rows, cols = newton.entry_rows, newton.entry_cols
-        mirror = rows > cols
-        size = newton.matrix.height
-        hessian = sparse_from_coo(
-            np.concatenate([rows, cols[mirror]]),
-            np.concatenate([cols, rows[mirror]]),
-            np.concatenate([values, values[mirror]]),
-            size,
-            size,
-        )
-        assert hessian.nze > 1.8 * newton.matrix.nze
-        rhs = np.random.default_rng(3).random(size)
-        x = hessian.CreateColVector()
+        assert isinstance(newton.factor, ngat.pardiso.Pardiso) == mkl
+        hessian = newton_hessian(newton)
+        assert abs(hessian - hessian.T).max() == 0
+        assert hessian.nnz > 1.5 * np.count_nonzero(newton.values)  # both triangles
+        rows, cols, values = sp.find(hessian)
+        whole = sparse_from_coo(rows, cols, values, *hessian.shape)
+        rhs = np.random.default_rng(3).random(hessian.shape[0])
+        x = whole.CreateColVector()
         x.FV().NumPy()[:] = rhs
-        expected = (hessian.Inverse(inverse="sparsecholesky") * x).Evaluate().FV().NumPy()
-        # NGSolve's sparse Cholesky (ngat's factorisation without MKL) reads the lower triangle
-        # only; PARDISO, given it as well, solves to round-off.
-        lower = newton.matrix.Inverse(inverse="sparsecholesky")
-        assert np.array_equal((lower * x).Evaluate().FV().NumPy(), expected)
+        expected = (whole.Inverse(inverse="sparsecholesky") * x).Evaluate().FV().NumPy()
         assert np.allclose(newton._apply_inverse(rhs), expected, rtol=1e-9, atol=1e-12)
     finally:
         threads.restore()
@@ -157,15 +161,13 @@ def test_negative_curvature_direction_has_the_curvature_it_reports():
     found = newton.negative_curvature(residual, newton._apply_inverse(residual))
     assert found is not None, "random (u, v) with small v should show negative curvature"
     direction, curvature = found
-    values, cols, rowptr = map(np.asarray, newton.matrix.CSR())
-    lower = sp.csr_matrix((values, cols, rowptr), newton.matrix.shape)
-    hessian = lower + sp.triu(lower.T, k=1)
+    hessian = newton_hessian(newton)
     assert curvature < 0
     assert direction @ hessian @ direction == pytest.approx(curvature, rel=1e-8)
     assert not np.any(direction[held])
-    if hasattr(newton.inverse, "negative_eigenvalues"):  # PARDISO counts them (inertia)
+    if hasattr(newton.factor, "negative_eigenvalues"):  # PARDISO counts them (inertia)
         eigenvalues = np.linalg.eigvalsh(hessian.toarray())
-        assert newton.inverse.negative_eigenvalues == np.sum(eigenvalues < 0) > 0
+        assert newton.factor.negative_eigenvalues == np.sum(eigenvalues < 0) > 0
 
 
 def test_newton_leaves_saddles_and_breaks_with_converged_alternating_minimization(tmp_path):
