@@ -31,7 +31,7 @@ from scipy.linalg import eigh_tridiagonal
 
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError
-from ngat.pardiso import symmetric_factor
+from ngat.pardiso import dof_ordering, symmetric_factor
 from ngat.state import ATState
 
 __all__ = ["NewtonSolver"]
@@ -225,10 +225,9 @@ class NewtonSolver:
         self.values = values
         with state.timer("solve"):
             if self.factor is None:
-                ordering = self.half_steps.operators.ordering
-                if ordering is not None:  # of the vertices: their DOFs one after the other
-                    dofs = len(ordering) * np.arange(len(held) // len(ordering))
-                    ordering = (ordering[:, None] + dofs).ravel()
+                ordering = self.half_steps.operators.ordering  # of the vertices
+                if ordering is not None:
+                    ordering = dof_ordering(ordering, len(held))
                 self.factor = symmetric_factor(self.indptr, self.entry_cols, False, ordering)
             if np.isfinite(values).all():  # else the solves give NaN and the step is rejected
                 self.factor.factorise(values)

@@ -36,6 +36,7 @@ from ngat.forms import sparse_from_coo
 __all__ = [
     "AVAILABLE",
     "LowerCholesky",
+    "dof_ordering",
     "symmetric_factor",
     "MKL_CBWR_AUTO",
     "TWO_LEVEL",
@@ -352,8 +353,7 @@ class PardisoInverse(BaseMatrix):
         number[self.free] = np.arange(len(self.free))
         self._take, indptr, indices = _upper_triangle(matrix, number)
         if ordering is not None:
-            components = np.arange(matrix.height // len(ordering))
-            ordering = number[(ordering[:, None] + len(ordering) * components).ravel()]
+            ordering = number[dof_ordering(ordering, matrix.height)]
             ordering = ordering[ordering >= 0]
         self.factor = Pardiso(indptr, indices, definite, ordering, background=background)
         self.Update(background)
@@ -451,6 +451,16 @@ def background_ordering(graph: Callable[[], tuple[np.ndarray, np.ndarray]]) -> F
 def _ordering(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Return METIS's ordering of the graph of an upper triangle, computed on one thread."""
     return Pardiso(indptr, indices, definite=True, sequential=True).ordering.astype(np.int64)
+
+
+def dof_ordering(ordering: np.ndarray, size: int) -> np.ndarray:
+    """Return the ordering of ``size`` DOFs, k per vertex, from the vertices' ``ordering``.
+
+    The DOFs are component-major (DOF c nv + i is component c at vertex i) and are ordered
+    vertex by vertex: the k DOFs of a vertex one after the other.
+    """
+    components = np.arange(size // len(ordering))
+    return (ordering[:, None] + len(ordering) * components).ravel()
 
 
 def symmetric_factor(
