@@ -222,17 +222,16 @@ class NewtonSolver:
             values = self.hessian_values(u, v)
             values[held[self.entry_rows] | held[self.entry_cols]] = 0.0
             values[self.diagonal[held]] = 1.0
-        self.values = values
+        finite = bool(np.isfinite(values).all())  # else the solves give NaN: step rejected
+        self.values = values if finite else None
         with state.timer("solve"):
             if self.factor is None:
                 ordering = self.half_steps.operators.ordering  # of the vertices
                 if ordering is not None:
                     ordering = dof_ordering(ordering, len(held))
                 self.factor = symmetric_factor(self.indptr, self.entry_cols, False, ordering)
-            if np.isfinite(values).all():  # else the solves give NaN and the step is rejected
+            if finite:
                 self.factor.factorise(values)
-            else:
-                self.values = None
         return u, v, upper, gradient, held
 
     def step(self, crack: np.ndarray, ceiling: float = np.inf) -> str:
