@@ -184,7 +184,8 @@ def test_two_threads_factorise_to_the_same_bits_as_one(definite):
     """What lets ngat give MKL the cores while fixing every other pool (ngat.threads).
 
     On a mesh large enough for MKL to split the work (58k DOFs; two threads factorise
-    it about 1.5 times faster), indefinite as well (shifted by the mass), with the inertia.
+    it about 1.5 times faster), indefinite as well (shifted by the mass), with the inertia;
+    and METIS's ordering, which runs on MKL's threads in the background.
     """
     space = H1(MakeStructured2DMesh(nx=240, ny=240), order=1, dirichlet="left")
     u, w = space.TnT()
