@@ -35,6 +35,10 @@ __all__ = ["HalfStepSolvers", "LinearStatistics"]
 
 log = logging.getLogger(__name__)
 
+SLOTS = {"u": 1, "v": 2, "held": 3}
+"""Slot of each solver in the one symbolic analysis a mesh's solvers share
+(:meth:`HalfStepSolvers._shared_analysis`; :data:`ngat.pardiso.SLOTS` of them)."""
+
 SPLIT_STEP_TOL = 1e-10
 """Newton step, relative to max |u|, below which the u-step of a split whose energy is not
 piecewise quadratic (``spectral``) has converged: Newton converges quadratically there, and
@@ -332,9 +336,11 @@ class HalfStepSolvers:
             elif (free & ~inactive).sum() <= HeldCholesky.MAX_HELD:
                 self._v_correction(HeldCholesky(self._b_solver, inactive, decoupled=~free))
             else:
-                self._v_correction(
-                    LaggedCholesky(operators.b_matrix, inactive, 0, ordering=operators.ordering)
-                )
+                held = LaggedCholesky(
+                    operators.b_matrix, inactive, 0, ordering=operators.ordering,
+                    **self._shared_analysis("held"),
+                )  # fmt: skip
+                self._v_correction(held)
             self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
             self._v_residual.data -= operators.b_matrix * state.v.vec
             gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
@@ -370,10 +376,28 @@ class HalfStepSolvers:
             return solver
         if solver is None or not np.array_equal(free, solver.free):
             return LaggedCholesky(
-                matrix, free, self.max_cg, ordering=operators.ordering, background=background
-            )
+                matrix, free, self.max_cg, ordering=operators.ordering, background=background,
+                **self._shared_analysis(stage),
+            )  # fmt: skip
         solver.values_changed()
         return solver
+
+    def _shared_analysis(self, stage: str) -> dict:
+        """Return the solver whose analysis a new one of ``stage`` shares, and its slot.
+
+        ``stage``: ``"u"`` (a_j), ``"v"`` (b_j) or ``"held"`` (b_j on the bounded v-step's
+        inactive DOFs). b_j's graph is a_j's when u is scalar: one symbolic analysis per mesh
+        then serves all three, each factorised into a slot of its own
+        (:class:`ngat.pardiso.PardisoInverse`); the same bits as an analysis each.
+        """
+        scalar = self.state.elasticity.components == 1
+        candidates = {
+            "u": [self._a_solver] + [self._b_solver] * scalar,
+            "v": [self._b_solver] + [self._a_solver] * scalar,
+            "held": [self._b_solver],
+        }[stage]
+        analysis = next((c for c in candidates if isinstance(c, LaggedCholesky)), None)
+        return {"analysis": analysis, "slot": SLOTS[stage]}
 
     def _amg_forms(self, stage: str) -> list[BilinearForm]:
         """Return the forms h1amg is built on: b_j, or a_j's block of each component of u.
@@ -432,10 +456,12 @@ class HalfStepSolvers:
         if "a_factored" in saved:
             operators.set_a_values(saved["a_factored"])
             self._a_solver = LaggedCholesky(
-                operators.a_matrix, ~state.dirichlet, self.max_cg, ordering=operators.ordering
-            )
+                operators.a_matrix, ~state.dirichlet, self.max_cg, ordering=operators.ordering,
+                **self._shared_analysis("u"),
+            )  # fmt: skip
         if "b_factored" in saved:
             operators.b_matrix.AsVector().FV().NumPy()[:] = saved["b_factored"]
             self._b_solver = LaggedCholesky(
-                operators.b_matrix, saved["b_free"], self.max_cg, ordering=operators.ordering
-            )
+                operators.b_matrix, saved["b_free"], self.max_cg, ordering=operators.ordering,
+                **self._shared_analysis("v"),
+            )  # fmt: skip

@@ -57,6 +57,9 @@ class LaggedCholesky:
         Fill-reducing ordering of the mesh's vertices (:func:`ngat.pardiso.sparse_inverse`).
     background
         Factorise in the background (:meth:`refresh`).
+    analysis, slot
+        A solver of a matrix with the same graph whose symbolic analysis this one shares, and
+        the slot of that analysis it factorises into (:class:`ngat.pardiso.PardisoInverse`).
     """
 
     def __init__(
@@ -67,10 +70,15 @@ class LaggedCholesky:
         tol: float = 1e-10,
         ordering: np.ndarray | None = None,
         background: bool = False,
+        analysis: LaggedCholesky | None = None,
+        slot: int = 1,
     ):
         self.matrix = matrix
         self.free = free.copy()
-        self.inverse = sparse_inverse(matrix, free, ordering=ordering, background=background)
+        self.inverse = sparse_inverse(
+            matrix, free, ordering=ordering, background=background,
+            analysis=analysis.inverse if analysis else None, slot=slot,
+        )  # fmt: skip
         self.max_cg = max_cg
         self._factored = self._values_to_keep()
         self.tol = tol

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from ngsolve import H1
 
+import ngat.pardiso
 from ngat.diagnostics import Diagnostics
 from ngat.driver import run
 from ngat.forms import a_form
@@ -266,6 +267,20 @@ def test_held_cholesky_does_not_hold_the_decoupled_crack():
     LaggedCholesky(operators.b_matrix, inactive, max_cg=0).solve(rhs, expected)
     scale = np.abs(expected.FV().NumPy()).max()
     assert np.abs(found.FV().NumPy() - expected.FV().NumPy()).max() <= 1e-10 * scale
+
+
+@pytest.mark.skipif(not ngat.pardiso.AVAILABLE, reason="MKL is not installed")
+def test_a_j_and_b_j_of_a_scalar_u_share_one_analysis_per_mesh():
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"eps": 0.2})
+    state = ATState(scene.make_mesh(0.25), parameters.model, scene.loads, scene.crack)
+    steps = HalfStepSolvers(state)
+    state.apply_load(1.4)
+    steps.solve_u()
+    steps.solve_v(np.zeros(state.arrays.nv, dtype=bool))
+    a, b = steps._a_solver.inverse, steps._b_solver.inverse
+    assert a.factor is b.factor and (a.slot, b.slot) == (1, 2)
+    assert not a.free.all() and b.free.all()  # u is fixed on Ω_D, v nowhere
 
 
 def test_b_j_decouples_the_crack_it_is_given_each_time():
