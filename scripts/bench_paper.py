@@ -13,10 +13,13 @@ peak memory ≤ 2 GB.
 One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's quick variant);
 ``--until T`` stops the load history at t = T (e.g. 1.35: the pre-break steps alone);
 output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time of the load
-history and of the pictures (``ngat.experiment.draw_pictures``), seconds per
-timed phase, peak memory, AM iterations in total and in the growth window, linear solves,
-fracture time, E(1.0), final elements, element sizes, the wall of the steps before the
-break step, of it and after it) and ``phases.png``; the run's results folder in ``run/``.
+history and of the pictures (``ngat.experiment.draw_pictures``), the start-up before the run
+(importing ngat, NGSolve and SciPy and loading the scene, counted from the script's start) and
+the command's total, start-up + run + pictures: what ``ngat run two-slits`` takes, less the
+interpreter's own start of some 20 ms; seconds per timed phase, peak memory, AM iterations in
+total and in the growth window, linear solves, fracture time, E(1.0), final elements, element
+sizes, the wall of the steps before the break step, of it and after it) and ``phases.png``;
+the run's results folder in ``run/``.
 
 Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
 (removed at the end, also on an error or Ctrl-C) and runs the benchmark ``--repeats`` times
@@ -28,7 +31,7 @@ checkout's root: the two versions never share a process and are measured by the 
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max) of the load
-history and with the pictures, the share
+history, with the pictures and of the whole command, the share
 of the wall time per phase ("–" where a checkout does not time a phase), the median walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
@@ -53,6 +56,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+STARTED = time.perf_counter()
+"""When this script began (after the standard library's imports): start-up counts from here."""
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPT = Path(__file__).resolve()
 REFERENCE = json.loads((ROOT / "geometries/reference/two_slits.json").read_text())
@@ -116,6 +121,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     result = run(scene, parameters, times, folder)
     wall = time.perf_counter() - begin
     pictures = optional(lambda: timed_pictures(folder, scene))
+    start = begin - STARTED
     records, summary = result.records, result.summary
     timing = summary.get("timing", {})
     onset = optional(lambda: growth_onset(records))
@@ -124,6 +130,8 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     return {
         "wall_s": round(wall, 2),
         "pictures_s": pictures,
+        "start_s": round(start, 2),
+        "command_s": optional(lambda: round(start + wall + pictures, 2)),
         "phases_s": {phase: seconds for phase, seconds in timing.items() if phase != "wall"},
         "solve_fraction": optional(lambda: round(timing["solve"] / timing["wall"], 3)),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
@@ -254,6 +262,9 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
         "with_pictures_median_s": optional(
             lambda: round(statistics.median(b["wall_s"] + b["pictures_s"] for b in benches), 2)
         ),
+        "command_median_s": optional(
+            lambda: round(statistics.median(b["command_s"] for b in benches), 2)
+        ),
         "phase_share": {
             p: round(statistics.median(b["phases_s"][p] / b["wall_s"] for b in benches), 3)
             if all(p in (b.get("phases_s") or {}) for b in benches)
@@ -318,6 +329,10 @@ def table(comparison: dict) -> str:
     line("wall time median [s]", lambda r: cell(r["wall_median_s"], 1))
     line("wall time min – max [s]", lambda r: f"{r['wall_min_s']:.1f} – {r['wall_max_s']:.1f}")
     line("with the pictures, median [s]", lambda r: cell(r.get("with_pictures_median_s"), 1))
+    line(
+        "the command: start-up, run, pictures, median [s]",
+        lambda r: cell(r.get("command_median_s"), 1),
+    )
     for stage in STAGES:
         line(f"{stage}, median [s]", lambda r, s=stage: cell(r["stage_median_s"][s], 1))
     for phase in comparison["phases"]:

@@ -94,6 +94,11 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert current["fracture_time"] is None and against["fracture_time"] is None
     # The command's pictures come on top of the load history.
     assert current["with_pictures_median_s"] > current["wall_median_s"]
+    # The command adds its start-up (NGSolve's import alone takes some 0.3 s).
+    run = comparison["runs"]["current"][0]
+    assert run["start_s"] > 0.2
+    assert run["command_s"] == pytest.approx(run["start_s"] + run["wall_s"] + run["pictures_s"])
+    assert current["command_median_s"] == run["command_s"]
     # No break step before t = 1.35: every step's wall is before it.
     stages = current["stage_median_s"]
     assert stages["before the break"] > 0
@@ -103,6 +108,7 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     markdown = (tmp_path / "compare.md").read_text()
     assert markdown.startswith("two-slits --quick --until 1.35,")
     assert "| fracture time |" in markdown
+    assert "| the command: start-up, run, pictures, median [s] |" in markdown
     assert "| break step, median [s] | – | – |" in markdown
     ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
     assert comparison["pair_ratios"] == [round(ratio, 3)]
