@@ -13,12 +13,13 @@ peak memory ≤ 2 GB.
 One run: ``python scripts/bench_paper.py`` (full) or ``--quick`` (the scene's quick variant);
 ``--until T`` stops the load history at t = T (e.g. 1.35: the pre-break steps alone);
 output in ``--out`` (default ``results/bench_paper``): ``bench.json`` (wall time of the load
-history and of the pictures (``ngat.experiment.draw_pictures``), the start-up before the run
-(importing ngat, NGSolve and SciPy and loading the scene, counted from the script's start) and
-the command's total, start-up + run + pictures: what ``ngat run two-slits`` takes, less the
-interpreter's own start of some 20 ms; seconds per timed phase, peak memory, AM iterations in
-total and in the growth window, linear solves, fracture time, E(1.0), final elements, element
-sizes, the wall of the steps before the break step, of it and after it) and ``phases.png``;
+history and of the pictures, drawn as ``ngat run`` draws them
+(``ngat.experiment.pictures_on_exit``), the start-up before the run (importing ngat, NGSolve
+and SciPy and loading the scene, counted from the script's start) and the command's total,
+start-up + run + pictures: what ``ngat run two-slits`` takes, less the interpreter's own start
+of some 20 ms; seconds per timed phase, peak memory, AM iterations in total and in the growth
+window, linear solves, fracture time, E(1.0), final elements, element sizes, the wall of the
+steps before the break step, of it and after it) and ``phases.png``;
 the run's results folder in ``run/``.
 
 Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
@@ -117,10 +118,13 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     parameters, times = scene.configure(quick=quick)
     if until is not None:
         times = times[times <= until + 1e-12]
+    drawing = pictures_on_exit(folder, scene)
     begin = time.perf_counter()
-    result = run(scene, parameters, times, folder)
-    wall = time.perf_counter() - begin
-    pictures = optional(lambda: timed_pictures(folder, scene))
+    with drawing or contextlib.nullcontext():
+        result = run(scene, parameters, times, folder)
+        end = time.perf_counter()
+    wall = end - begin
+    pictures = None if drawing is None else round(time.perf_counter() - end, 2)
     start = begin - STARTED
     records, summary = result.records, result.summary
     timing = summary.get("timing", {})
@@ -152,19 +156,17 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     }
 
 
-def timed_pictures(folder: Path, scene) -> float | None:
-    """Return the seconds ``ngat run`` spends drawing a finished run's pictures at its end.
+def pictures_on_exit(folder: Path, scene) -> contextlib.AbstractContextManager | None:
+    """Return the block that draws a run's pictures at its end as ``ngat run`` does.
 
-    ``None`` for a revision without :func:`ngat.experiment.draw_pictures`.
+    That is :func:`ngat.experiment.pictures_on_exit` (with the picture process where the
+    revision has one); ``None`` for a revision without it.
     """
     try:
-        from ngat.experiment import draw_pictures
+        from ngat.experiment import pictures_on_exit as drawn_on_exit
     except ImportError:
         return None
-
-    begin = time.perf_counter()
-    draw_pictures(folder, scene.slits)
-    return round(time.perf_counter() - begin, 2)
+    return drawn_on_exit(folder, scene.slits)
 
 
 def plot_phases(bench: dict, title: str, path: Path) -> None:
