@@ -5,8 +5,7 @@
 :func:`plan_run` finds the scene, applies the parameter changes (checked as ``--set`` checks
 them) and checks the results folder; :func:`ngat.driver.run` computes the load history;
 :func:`pictures_on_exit` draws ``energies.png``, ``v_final.png``, ``mesh_final.png`` and
-``mesh_zoom.png`` (plane models: also ``u_final.png``) when the run ends, however it ends, the
-two mesh pictures in a process started with the run (:mod:`ngat.picture_process`).
+``mesh_zoom.png`` (plane models: also ``u_final.png``) when the run ends, however it ends.
 """
 
 from __future__ import annotations
@@ -27,7 +26,6 @@ from ngat.driver import run as run_history
 from ngat.lock import folder_lock
 from ngat.output import OutputError, check_results_folder
 from ngat.parameters import ParameterError, Parameters
-from ngat.picture_process import PictureProcess
 from ngat.results import RunResult, load_results
 from ngat.scene import Scene, load_scene
 
@@ -121,9 +119,7 @@ def plan_run(
     return RunPlan(scene, parameters, times, folder, resume, done, finished)
 
 
-def draw_pictures(
-    folder: Path, slits: Sequence = (), process: PictureProcess | None = None
-) -> list[Path]:
+def draw_pictures(folder: Path, slits: Sequence = ()) -> list[Path]:
     """Draw the pictures a run leaves: energies, final v, the final mesh, whole and zoomed.
 
     Plane models add |u| on the deformed body (``u_final.png``).
@@ -137,33 +133,20 @@ def draw_pictures(
         Results folder.
     slits
         The scene's slits (the zoom centres on the first one's crack tip).
-    process
-        A picture process started with the run (:mod:`ngat.picture_process`): it draws the
-        mesh pictures meanwhile; where it fails they are drawn here. Ended in any case.
 
     Returns
     -------
     list of Path
         The pictures written; none if the folder holds no finished step yet.
     """
-    begin = time.perf_counter()
-    asked = process is not None and process.draw(folder, slits)
-    try:
-        from ngat.plotting import PlotError, plot_mesh_pictures, plot_results
+    from ngat.plotting import PlotError, plot_results
 
-        try:
-            written = plot_results(
-                folder, times=[], slits=slits, renderer="matplotlib", mesh=not asked
-            )
-        except PlotError:
-            log.debug("%s: no finished step, no pictures", folder)
-            return []
-        if asked:
-            meshes = process.result()
-            written += plot_mesh_pictures(folder, slits=slits) if meshes is None else meshes
-    finally:
-        if process is not None:
-            process.close()
+    begin = time.perf_counter()
+    try:
+        written = plot_results(folder, times=[], slits=slits, renderer="matplotlib")
+    except PlotError:
+        log.debug("%s: no finished step, no pictures", folder)
+        return []
     names = ", ".join(path.name for path in written)
     log.info("pictures in %.1f s: %s", time.perf_counter() - begin, names)
     return written
@@ -194,26 +177,20 @@ def pictures_on_exit(folder: Path, slits: Sequence = (), enabled: bool = True) -
     slits
         The scene's slits.
     enabled
-        ``False``: draw nothing (``--no-plots``); else a picture process
-        (:mod:`ngat.picture_process`) starts at once and draws the mesh pictures at the end.
+        ``False``: draw nothing (``--no-plots``).
     """
     before = _energies_stamp(folder)
-    process = PictureProcess() if enabled else None
     try:
         yield
     except BaseException:
         if enabled and _energies_stamp(folder) != before:
             try:
-                draw_pictures(folder, slits, process)
+                draw_pictures(folder, slits)
             except Exception as error:  # the run's own error matters, not the pictures'
                 log.info("pictures not drawn: %s: %s", type(error).__name__, error)
         raise
-    else:
-        if enabled:
-            draw_pictures(folder, slits, process)
-    finally:
-        if process is not None:
-            process.close()  # where draw_pictures has not ended it
+    if enabled:
+        draw_pictures(folder, slits)
 
 
 def run(

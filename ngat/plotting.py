@@ -45,7 +45,6 @@ from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
     "plot_results",
-    "plot_mesh_pictures",
     "read_energies",
     "offscreen_rendering_works",
     "energies_figure",
@@ -115,7 +114,6 @@ def plot_results(
     zoom: tuple[float, float, float] | None = None,
     slits: Sequence | None = None,
     renderer: str = "auto",
-    mesh: bool = True,
 ) -> list[Path]:
     """Draw the pictures of a finished or partial results folder.
 
@@ -139,9 +137,6 @@ def plot_results(
         the scene named in ``summary.json``, if it has any.
     renderer
         ``"pyvista"``, ``"matplotlib"`` or ``"auto"`` (pyvista if off-screen rendering works).
-    mesh
-        ``False``: no ``mesh_final.png`` and ``mesh_zoom.png`` (drawn elsewhere,
-        :func:`plot_mesh_pictures`).
 
     Returns
     -------
@@ -195,57 +190,13 @@ def plot_results(
         if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
             written.append(plot_field(snapshot, frame.t, path, renderer))
-    if mesh:
-        written += _mesh_pictures(folder, grid, final.t, zoom, slits)
-    log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
-    return written
-
-
-def plot_mesh_pictures(
-    folder: str | Path,
-    zoom: tuple[float, float, float] | None = None,
-    slits: Sequence | None = None,
-) -> list[Path]:
-    """Draw ``mesh_final.png`` and ``mesh_zoom.png`` of a results folder's last stored step.
-
-    The part of :func:`plot_results` that :mod:`ngat.picture_process` draws beside the rest.
-
-    Parameters
-    ----------
-    folder, zoom, slits
-        As for :func:`plot_results`.
-
-    Returns
-    -------
-    list of Path
-        The pictures written; none if the folder holds no readable fields.
-    """
-    folder = Path(folder)
-    energies = None
-    if (folder / "energies.csv").exists():
-        energies = read_energies(folder / "energies.csv")
-    frames = field_series(folder, energies)
-    while frames and (grid := read_fields(frames[-1])) is None:
-        frames.pop()
-    if not frames:
-        return []
-    return _mesh_pictures(folder, grid, frames[-1].t, zoom, slits)
-
-
-def _mesh_pictures(
-    folder: Path,
-    grid: pyvista.UnstructuredGrid,
-    t: float,
-    zoom: tuple[float, float, float] | None,
-    slits: Sequence | None,
-) -> list[Path]:
-    """Draw the last step's mesh, whole and in the zoom window (see :func:`plot_results`)."""
     points, triangles = grid_triangles(grid)
-    written = [plot_mesh(points, triangles, None, t, folder / "mesh_final.png")]
+    written.append(plot_mesh(points, triangles, None, final.t, folder / "mesh_final.png"))
     if zoom is None:
         zoom = default_zoom(points, triangles, grid.point_data["v"], _scene_slits(folder, slits))
     v = np.asarray(grid.point_data["v"])
-    written.append(plot_mesh(points, triangles, v, t, folder / "mesh_zoom.png", zoom))
+    written.append(plot_mesh(points, triangles, v, final.t, folder / "mesh_zoom.png", zoom))
+    log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
     return written
 
 

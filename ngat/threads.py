@@ -32,7 +32,7 @@ from __future__ import annotations
 import ctypes
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from typing import Any
 
 import ngsolve
@@ -88,10 +88,8 @@ def oversubscription(factorisation: int, interval: float = 0.1) -> str | None:
     """Return a warning if other work keeps busy the cores the factorisation's threads need.
 
     The processors' use is sampled over ``interval`` seconds (psutil), before the run computes
-    anything; the use of this process's own children (the picture process,
-    :mod:`ngat.picture_process`, importing matplotlib meanwhile) is not other work. Threads of
-    one factorisation wait for each other at every step of it: two quick runs side by side with
-    two threads each took 58 s each, against 24 s with one.
+    anything. Threads of one factorisation wait for each other at every step of it: two quick
+    runs side by side with two threads each took 58 s each, against 24 s with one.
 
     Returns
     -------
@@ -101,11 +99,8 @@ def oversubscription(factorisation: int, interval: float = 0.1) -> str | None:
     if factorisation < 2:
         return None
     cores = sorted(os.sched_getaffinity(0))
-    children = psutil.Process().children(recursive=True)
-    _processor_use(children)  # starts their counters
     usage = psutil.cpu_percent(interval=interval, percpu=True)
-    own = _processor_use(children)
-    busy = sum(usage[core] for core in cores if core < len(usage)) / 100 - own
+    busy = sum(usage[core] for core in cores if core < len(usage)) / 100
     if busy <= len(cores) - factorisation + 0.5:
         return None
     return (
@@ -113,15 +108,6 @@ def oversubscription(factorisation: int, interval: float = 0.1) -> str | None:
         f"on {factorisation} threads that wait for each other: runs side by side take several "
         "times longer each. Set MKL_NUM_THREADS=1 for runs side by side (ngat sweep does)."
     )
-
-
-def _processor_use(processes: list[psutil.Process]) -> float:
-    """Return the cores the processes used since the last call for them (psutil), in cores."""
-    use = 0.0
-    for process in processes:
-        with suppress(psutil.Error):  # ended meanwhile
-            use += process.cpu_percent(interval=None) / 100
-    return use
 
 
 @contextmanager

@@ -159,8 +159,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
 def pictures_on_exit(folder: Path, scene) -> contextlib.AbstractContextManager | None:
     """Return the block that draws a run's pictures at its end as ``ngat run`` does.
 
-    That is :func:`ngat.experiment.pictures_on_exit` (with the picture process where the
-    revision has one); ``None`` for a revision without it.
+    That is :func:`ngat.experiment.pictures_on_exit`; ``None`` for a revision without it.
     """
     try:
         from ngat.experiment import pictures_on_exit as drawn_on_exit

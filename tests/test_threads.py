@@ -152,23 +152,3 @@ def test_factorisation_threads_sleep_between_factorisations_during_a_run(monkeyp
     threads = FixedThreads()
     assert openmp.kmp_get_blocktime() == before
     threads.restore()
-
-
-@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="two threads need two cores")
-def test_the_runs_own_picture_process_is_not_other_work(monkeypatch):
-    import ngat.threads
-
-    cores = sorted(os.sched_getaffinity(0))
-    monkeypatch.setattr(ngat.threads.psutil, "cpu_percent", lambda **kw: [100.0] * (max(cores) + 1))
-
-    class Child:  # a process of this run's own that kept a core busy
-        def cpu_percent(self, interval=None):
-            return 100.0
-
-    children = [Child() for _ in cores]
-    monkeypatch.setattr(
-        ngat.threads.psutil.Process, "children", lambda self, recursive=False: children
-    )
-    assert ngat.threads.oversubscription(2) is None
-    children.clear()
-    assert ngat.threads.oversubscription(2) is not None
