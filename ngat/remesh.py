@@ -217,7 +217,10 @@ def _split_outside(
     points, fans, split
         The points with the centroids appended, the fans' triangles and the split elements.
     """
-    outside = np.flatnonzero(~region)
+    # The owner of a divided edge holds both its ends: only such elements outside are looked at
+    # (a dictionary of every directed edge outside cost 60 ms per re-meshing at 100k elements).
+    ends = np.unique(np.array(list(hanging), dtype=np.int64))
+    outside = np.flatnonzero(~region & (np.isin(elements, ends).sum(axis=1) >= 2))
     owner = {}
     for e in outside:
         for k in range(3):
