@@ -34,6 +34,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pyvista
+from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
@@ -50,6 +51,7 @@ __all__ = [
     "energies_figure",
     "sweep_figure",
     "draw_segments",
+    "draw_bars",
     "PlotError",
 ]
 
@@ -278,7 +280,7 @@ def energies_figure(energies: dict[str, np.ndarray]) -> Figure:
     ax.set_ylabel("elements")
     ax = axes[3]
     if "am_iterations" in energies:
-        ax.bar(t, energies["am_iterations"], width=0.8 * _spacing(t), color="C0")
+        draw_bars(ax, t, energies["am_iterations"], 0.8 * _spacing(t), "C0")
         ax.set_yscale("log")
         if "converged" in energies and np.any(energies["converged"] == 0):
             failed = energies["converged"] == 0
@@ -289,6 +291,19 @@ def energies_figure(energies: dict[str, np.ndarray]) -> Figure:
     for ax in axes:
         ax.grid(True, lw=0.3, alpha=0.5)
     return fig
+
+
+def draw_bars(ax, x: np.ndarray, height: np.ndarray, width: float, color) -> None:
+    """Draw the bars ``ax.bar`` draws, as one collection instead of a rectangle per bar.
+
+    The 161 load steps' bars of the paper's example took 0.24 s of ``energies.png``'s 0.59 s.
+    """
+    x, height = np.asarray(x, dtype=float), np.asarray(height, dtype=float)
+    left, right, zero = x - width / 2, x + width / 2, np.zeros_like(x)
+    corners = [(left, zero), (left, height), (right, height), (right, zero)]
+    vertices = np.stack([np.column_stack(corner) for corner in corners], axis=1)
+    ax.add_collection(PolyCollection(vertices, facecolors=color, edgecolors="none"))
+    ax.autoscale_view()
 
 
 def _spacing(t: np.ndarray) -> float:

@@ -7,7 +7,7 @@ import pytest
 from matplotlib.image import imread
 
 from ngat.cli import main
-from ngat.plotting import PlotError, field_series, plot_results, read_energies
+from ngat.plotting import PlotError, draw_bars, field_series, plot_results, read_energies
 
 PICTURES = ["energies.png", "v_final.png", "mesh_final.png", "mesh_zoom.png"]
 
@@ -121,3 +121,26 @@ def test_mesh_edges_are_drawn_once_each_with_their_width_rounded_to_a_class():
             drawn.append(index[0])
     assert sorted(drawn) == list(range(500))
     assert len(ax.get_lines()) <= WIDTH_CLASSES
+
+
+def test_bars_as_one_collection_look_as_matplotlibs_bars_on_a_log_axis():
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    t = np.round(0.01 * np.arange(161), 10)
+    iterations = np.ones(161)
+    iterations[120:141] = np.arange(2, 23) ** 1.5
+    pictures = []
+    for draw in (
+        lambda ax: ax.bar(t, iterations, width=0.008, color="C0"),
+        lambda ax: draw_bars(ax, t, iterations, 0.008, "C0"),
+    ):
+        fig = Figure(figsize=(4, 2), dpi=100)
+        ax = fig.subplots()
+        draw(ax)
+        ax.set_yscale("log")
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        pictures.append(np.asarray(canvas.buffer_rgba()))
+    assert pictures[0].std() > 10  # bars were drawn
+    np.testing.assert_array_equal(pictures[0], pictures[1])
