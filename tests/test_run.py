@@ -111,7 +111,7 @@ def test_the_progress_bar_redraws_once_a_second(tmp_path, monkeypatch):
     command = ["run", "smooth-laplace", "--quick", "--no-plots", "--out", str(tmp_path / "s")]
     assert main(command) == 0
     wall = time.perf_counter() - begin
-    assert wall > 2  # long enough for ten redraws a second to fail the test
+    assert wall > 0.5  # ten redraws a second would then exceed the bound
     assert len(redraws) <= REFRESH_PER_SECOND * wall + 3
 
 
