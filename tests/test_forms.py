@@ -186,10 +186,16 @@ def test_row_sums_vertex_means_stiffness_sums_centroids_and_diameters_are_numpys
     arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
     v = rng.random(arrays.nv) * 10.0 ** rng.integers(-8, 8, arrays.nv)  # rounding order shows
     np.testing.assert_array_equal(arrays.vertex_mean(v), v[arrays.elements].mean(axis=1))
+    corners = arrays.coords[arrays.elements]
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    np.testing.assert_array_equal(arrays.area, 0.5 * np.abs(det))
+    g1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / det[:, None]
+    g2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / det[:, None]
+    np.testing.assert_array_equal(arrays.grad_phi, np.stack([-(g1 + g2), g1, g2], axis=1))
     grad_phi = arrays.grad_phi
     stiffness = arrays.area[:, None, None] * np.einsum("eak,ebk->eab", grad_phi, grad_phi)
     np.testing.assert_array_equal(arrays.stiffness, stiffness)
-    corners = arrays.coords[arrays.elements]
     longest = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2).max(axis=1)
     np.testing.assert_array_equal(element_diameters(arrays.coords, arrays.elements), longest)
     weights = rng.random(arrays.ne) * 10.0 ** rng.integers(-8, 8, arrays.ne)
