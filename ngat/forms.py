@@ -408,8 +408,8 @@ def element_geometry(
     Component by component, on (ne,) arrays gathered once per vertex coordinate, and with
     the stiffness's symmetric entries computed once: every number is that of the same
     arithmetic on the (ne, 3, 2) stack of the elements' coordinates, to the last bit
-    (products commute exactly, and (−a)/b = −(a/b)), in less than half its time (the stack
-    and its temporaries cost 21 ms at 79k elements, once per new mesh).
+    (products commute exactly, and (−a)/b = −(a/b)), in a little over half its time (8.7
+    against 15.8 ms at 79k elements, once per new mesh).
     """
     corners = [elements[:, i] for i in range(3)]
     (x0, x1, x2), (y0, y1, y2) = ([c[k] for k in corners] for c in coords.T)
