@@ -374,6 +374,17 @@ def row_sum(values: np.ndarray) -> np.ndarray:
     return total
 
 
+def corner_components(coords: np.ndarray, elements: np.ndarray) -> tuple[list, list]:
+    """Return the x and the y coordinates of every element's three corners, as (ne,) arrays.
+
+    Gathered component by component: faster than the (ne, 3, 2) stack ``coords[elements]``
+    and its strided columns.
+    """
+    corners = [elements[:, i] for i in range(3)]
+    x, y = ([component[corner] for corner in corners] for component in coords.T)
+    return x, y
+
+
 def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """Return the diameter h_T (longest edge) of each triangle.
 
@@ -381,8 +392,7 @@ def element_diameters(coords: np.ndarray, elements: np.ndarray) -> np.ndarray:
     lengths (the square root is monotone and correctly rounded), with one root per element
     and the coordinates gathered component by component (3.6 times faster at 145k elements).
     """
-    corners = [elements[:, i] for i in range(3)]
-    x, y = ([component[corner] for corner in corners] for component in coords.T)
+    x, y = corner_components(coords, elements)
 
     def squared(i: int, j: int) -> np.ndarray:
         dx, dy = x[j] - x[i], y[j] - y[i]
@@ -411,8 +421,7 @@ def element_geometry(
     (products commute exactly, and (−a)/b = −(a/b)), in a little over half its time (8.7
     against 15.8 ms at 79k elements, once per new mesh).
     """
-    corners = [elements[:, i] for i in range(3)]
-    (x0, x1, x2), (y0, y1, y2) = ([c[k] for k in corners] for c in coords.T)
+    (x0, x1, x2), (y0, y1, y2) = corner_components(coords, elements)
     e1x, e1y, e2x, e2y = x1 - x0, y1 - y0, x2 - x0, y2 - y0
     det = e1x * e2y - e1y * e2x
     area = 0.5 * np.abs(det)
