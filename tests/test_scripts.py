@@ -180,6 +180,25 @@ def test_bench_break_step_repeats_the_uninterrupted_step(tmp_path, quick_run):
     assert np.all(moved[v > 0] > 0) and np.all(moved <= script.PERTURBATION * v)
 
 
+def test_bench_break_step_to_the_end(tmp_path, quick_run):
+    # --to-end resumes the quick variant from the checkpoint of t = 1.30 to its last load time
+    # (its break step at 1.40 among them): one record for the steps from t = 1.35 on, their
+    # iterations and solves summed, I_j and the elements of the last, to the uninterrupted
+    # run's last bit; the trace holds every iteration of those steps.
+    bench_break_step("--repeats", "1", "--to-end", "--out", str(tmp_path))
+    bench = json.loads((tmp_path / "bench.json").read_text())
+    result, _, _ = quick_run
+    steps = [r for r in result.records if r["t"] > 1.30 + 1e-9]
+    assert len(steps) > 1 and bench["to_end"]
+    assert bench["iterations"] == sum(r["am_iterations"] for r in steps)
+    assert bench["linear_solves"] == sum(r["linear_solves"] for r in steps)
+    assert bench["total_after"] == steps[-1]["total"]
+    assert bench["elements_after"] == steps[-1]["elements"]
+    trace = list(csv.DictReader(open(tmp_path / "trace.csv")))
+    assert len(trace) == bench["iterations"]
+    assert int(trace[-1]["elements"]) == steps[-1]["elements"]
+
+
 def test_bench_break_step_refuses_a_time_that_is_not_a_load_time(tmp_path):
     done = bench_break_step("--at", "1.37", "--out", str(tmp_path), check=False)
     assert done.returncode == 2
