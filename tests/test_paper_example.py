@@ -8,10 +8,12 @@ fracture time within 0.02 (measured 1.40 with the slit tips resolved to 0.18ε w
 band to 0.27ε; 1.39 with a band of 0.18ε throughout), E(1.0) within 0.1 % (measured +0.091 %:
 the elastic field at the default tol_rel 0.17 with the slit tips at 0.18ε; +0.082 % with the
 discs of 3ε about them, +0.102 % with the slit tips in the band of 0.27ε, +0.145 % at tol_rel
-0.18 and a band of 0.18ε), the final mesh between 1e5 and 2.5e5 elements (measured 136,643:
+0.18 and a band of 0.18ε), the final mesh between 1e5 and 2.5e5 elements (measured 139,223:
 the crack band of 0.27ε along both cracks, graded into the body once they run; 180,065 with a
-band of 0.18ε), under 40 % of the reference's, and I_j of the broken body at t = 1.6 within 1 %
-of the reference's (measured +0.43 % with Newton's escapes of ‖d_v‖∞ = 0.5, +0.81 % with 0.1)."""
+band of 0.18ε), under 40 % of the reference's, and I_j of the broken body at t = 1.6 within
+0.3 % of the reference's (measured +0.06 % since Newton's search for negative curvature waits
+for a settled Ritz pair, +0.03–0.07 % over five draws perturbed at round-off; before, +0.31–0.47 %
+over such draws with escapes of ‖d_v‖∞ = 0.5 and +0.81 % with 0.1, then tested within 1 %)."""
 
 import json
 from pathlib import Path
@@ -40,7 +42,7 @@ def test_full_paper_example(tmp_path):
     assert abs(e_run / e_ref - 1) < 1e-3
     broken_ref, broken_run = steps["total"][-1], records[-1]["total"]
     assert np.isclose(steps["t"][-1], records[-1]["t"])
-    assert abs(broken_run / broken_ref - 1) < 1e-2
+    assert abs(broken_run / broken_ref - 1) < 3e-3
     last = records[-1]
     assert 1e5 <= last["elements"] <= 2.5e5
     assert last["elements"] < 0.4 * reference["cost"]["final_elements"]

@@ -3,7 +3,9 @@
 Stored from ``ngat run two-slits --quick`` with the default solver ``newton`` (with Newton's
 wait after steps that do not pay; before it, 74,571 elements at the end and energies within 5e−8
 relative; with escapes along negative curvature of ‖d_v‖∞ = 0.5, before 0.1: 74,349 elements at
-the end instead of 76,119, the same values up to t = 1.3), the default stopping test
+the end instead of 76,119, the same values up to t = 1.3; with the search for negative
+curvature waiting for a settled Ritz pair, 74,465 against 74,079 on one machine, the same values
+up to t = 1.3), the default stopping test
 ``am_stop="contraction"`` (with the crack's flanks up to v = 1/4 discounted,
 ``ngat.minimization.CRACKED``; with 0.1, 73,629 elements at the end and the same energies up to
 t = 1.3) and the default adaptivity ``band`` (the quick crack band: elements of 0.35ε, graded

@@ -170,6 +170,28 @@ def test_negative_curvature_direction_has_the_curvature_it_reports():
         assert newton.factor.negative_eigenvalues == np.sum(eigenvalues < 0) > 0
 
 
+@pytest.mark.parametrize("ritz_tol", [1.0, 0.01])
+def test_negative_curvature_search_returns_a_settled_ritz_pair(ritz_tol):
+    # The escape's direction d = H⁻¹x must come from a Ritz pair (θ, x) of H⁻¹ whose
+    # residual ‖H⁻¹x − θx‖ = ‖d − θ Hd‖ is at most ritz_tol |θ| (x = Hd, ‖x‖ = 1); a search
+    # that stopped at the first negative Ritz value would leave it larger, and the escape's
+    # direction would hang on round-off.
+    scene = load_scene("two-slits")
+    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
+    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
+    state.apply_load(1.3)
+    rng = np.random.default_rng(2)
+    state.u_values[:] += 0.5 * rng.random(state.arrays.nv)
+    state.v_values[:] = 0.3 * rng.random(state.arrays.nv)
+    newton = NewtonSolver(state, lanczos_steps=60, ritz_tol=ritz_tol)
+    _, _, _, gradient, held = newton._factorise(state.crack_set())
+    residual = np.where(held, 0.0, -gradient)
+    direction, curvature = newton.negative_curvature(residual, newton._apply_inverse(residual))
+    x = newton_hessian(newton) @ direction
+    assert np.linalg.norm(x) == pytest.approx(1.0, rel=1e-8)
+    assert np.linalg.norm(direction - curvature * x) <= ritz_tol * abs(curvature)
+
+
 def test_newton_leaves_saddles_and_breaks_with_converged_alternating_minimization(tmp_path):
     # On the obtuse-line mesh a Newton step from an alternating-minimisation iterate near a
     # saddle lands on another branch unless the negative curvature there is found and followed:
