@@ -146,17 +146,22 @@ def test_pointwise_irreversibility_keeps_v_below_the_previous_step(tmp_path):
     assert result.records[-1]["v_bound_active"] > 0
 
 
-def test_negative_curvature_direction_has_the_curvature_it_reports():
+def indefinite_state() -> ATState:
+    """A coarse two-slits state at t = 1.3 with random u and small v: far from a minimiser, so
+    that the Hessian of I_j is indefinite."""
     scene = load_scene("two-slits")
     parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
     state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
     state.apply_load(1.3)
     rng = np.random.default_rng(2)
     state.u_values[:] += 0.5 * rng.random(state.arrays.nv)
-    state.v_values[:] = 0.3 * rng.random(state.arrays.nv)  # far from a minimiser: H indefinite
-    newton = NewtonSolver(state)
-    crack = state.crack_set()
-    _, _, _, gradient, held = newton._factorise(crack)
+    state.v_values[:] = 0.3 * rng.random(state.arrays.nv)
+    return state
+
+
+def test_negative_curvature_direction_has_the_curvature_it_reports():
+    newton = NewtonSolver(indefinite_state())
+    _, _, _, gradient, held = newton._factorise(newton.state.crack_set())
     residual = np.where(held, 0.0, -gradient)
     found = newton.negative_curvature(residual, newton._apply_inverse(residual))
     assert found is not None, "random (u, v) with small v should show negative curvature"
@@ -176,13 +181,7 @@ def test_negative_curvature_search_returns_a_settled_ritz_pair(ritz_tol):
     # residual ‖H⁻¹x − θx‖ = ‖d − θ Hd‖ is at most ritz_tol |θ| (x = Hd, ‖x‖ = 1); a search
     # that stopped at the first negative Ritz value would leave it larger, and the escape's
     # direction would hang on round-off.
-    scene = load_scene("two-slits")
-    parameters, _ = scene.configure(overrides={"adapt": "fixed", "maxh": 0.5, "eps": 0.2})
-    state = ATState(scene.make_mesh(0.5), parameters.model, scene.loads, scene.crack)
-    state.apply_load(1.3)
-    rng = np.random.default_rng(2)
-    state.u_values[:] += 0.5 * rng.random(state.arrays.nv)
-    state.v_values[:] = 0.3 * rng.random(state.arrays.nv)
+    state = indefinite_state()
     newton = NewtonSolver(state, lanczos_steps=60, ritz_tol=ritz_tol)
     _, _, _, gradient, held = newton._factorise(state.crack_set())
     residual = np.where(held, 0.0, -gradient)
