@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 
 from ngat.band import DAMAGED, mesh_geometry
 from ngat.crack import GROWN, Slit, grown, tips_of
+from ngat.geometry import without_face_table
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
 
@@ -277,7 +278,8 @@ def splice(mesh: ngsolve.Mesh, patch: Patch) -> tuple[ngsolve.Mesh, np.ndarray]:
     renumber = np.cumsum(used) - 1
     old_vertex = np.flatnonzero(used)
     old_vertex[old_vertex >= len(coords)] = -1
-    new = ngm.Mesh(dim=2)
+    with without_face_table():
+        new = ngm.Mesh(dim=2)
     points = all_coords[used]
     new.AddPoints(np.column_stack([points, np.zeros(len(points))]))
     materials = [new.AddRegion(name, dim=2) for name in mesh.GetMaterials()]

@@ -24,7 +24,7 @@ import ngsolve
 import numpy as np
 
 from ngat import geometries
-from ngat.geometry import check_mesh_size, generate_mesh
+from ngat.geometry import check_mesh_size, generate_mesh, without_face_table
 from ngat.parameters import Parameters
 from ngat.state import SceneError
 
@@ -103,10 +103,11 @@ class Scene:
     slits: Sequence[tuple[tuple[float, float], tuple[float, float]]] = ()
 
     def make_mesh(self, maxh: float) -> ngsolve.Mesh:
-        """Return the initial mesh with element size ``maxh``."""
-        if self.mesh is not None:
-            return self.mesh(maxh)
-        return generate_mesh(self.geometry(), maxh)
+        """Return the initial mesh with element size ``maxh`` (:func:`without_face_table`)."""
+        with without_face_table():
+            if self.mesh is not None:
+                return self.mesh(maxh)
+            return generate_mesh(self.geometry(), maxh)
 
     def check(self, maxh: float | None = None) -> None:
         """Raise :class:`~ngat.state.SceneError` if a Dirichlet region is missing.
