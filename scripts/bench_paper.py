@@ -38,6 +38,13 @@ before, of and after the break step, linear solves, final elements, fracture tim
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
 current/REV of the median wall times and that of each pair (less sensitive to the machine's
 drift from one pair to the next).
+
+Another machine: ``--scaled-to S`` with ``--against REV`` states the seconds REV's load history
+took on a machine where a target was set (e.g. ``--against 6c4392c --scaled-to 47.8``: the
+default when the 30 s target of ``ngat run two-slits`` was set, whose history took 47.8 s
+there). Both checkouts' median wall and command are then also shown multiplied by S / REV's
+median wall here, the factor by which that machine was faster than this one on REV's code:
+what each would take there, as far as the two checkouts' work slows down alike.
 """
 
 from __future__ import annotations
@@ -343,6 +350,20 @@ def table(comparison: dict) -> str:
     line("fracture time", lambda r: cell(r["fracture_time"]))
     line("E(1.0) error [%]", lambda r: cell(r["energy_error_%"], 3))
     line("peak memory [MB]", lambda r: cell(r["peak_memory_mb"], 0))
+    scale = comparison.get("scale")
+    if scale is not None:
+        factor = scale["factor"]
+        line("wall time median, scaled [s]", lambda r: cell(r["wall_median_s"] * factor, 1))
+        line(
+            "the command median, scaled [s]",
+            lambda r: cell(optional(lambda: r["command_median_s"] * factor), 1),
+        )
+        lines += [
+            "",
+            f"Scaled: × {factor:.3f} = {scale['against_wall_s']:g} s / {comparison['against']}'s "
+            "median wall here, the machine on which its load history took "
+            f"{scale['against_wall_s']:g} s.",
+        ]
     mode = " ".join(["two-slits", *comparison["variant"]])
     return "\n".join(
         [
@@ -362,8 +383,14 @@ def stop(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
 
 
-def compare(revision: str, repeats: int, words: list[str], out: Path) -> None:
-    """Benchmark the current tree against ``revision``, alternating; write the table."""
+def compare(
+    revision: str, repeats: int, words: list[str], out: Path, scaled_to: float | None = None
+) -> None:
+    """Benchmark the current tree against ``revision``, alternating; write the table.
+
+    ``scaled_to``: the seconds ``revision``'s load history took on another machine; the
+    table then also shows the median walls and commands scaled to that machine.
+    """
     signal.signal(signal.SIGTERM, stop)
     labels = {"current": describe(None), "against": describe(revision)}
     runs: dict[str, list[dict]] = {"current": [], "against": []}
@@ -391,6 +418,12 @@ def compare(revision: str, repeats: int, words: list[str], out: Path) -> None:
             round(c["wall_s"] / a["wall_s"], 3)
             for c, a in zip(runs["current"], runs["against"], strict=True)
         ],
+        "scale": None
+        if scaled_to is None
+        else {
+            "against_wall_s": scaled_to,
+            "factor": scaled_to / summary["against"]["wall_median_s"],
+        },
         "runs": runs,
     }
     markdown = table(comparison)
@@ -413,11 +446,21 @@ def main() -> None:
     parser.add_argument(
         "--until", type=float, metavar="T", help="stop the load history at t = T (default: all)"
     )
+    parser.add_argument(
+        "--scaled-to",
+        type=float,
+        metavar="S",
+        help="with --against: REV's load history took S seconds on another machine; "
+        "also show both checkouts' times scaled to that machine",
+    )
     args = parser.parse_args()
+    if args.scaled_to is not None and (args.against is None or not args.scaled_to > 0):
+        parser.error("--scaled-to takes positive seconds and needs --against")
     if args.against is None:
         bench_one(args.quick, args.until, args.out)
     else:
-        compare(args.against, args.repeats, variant(args.quick, args.until), args.out)
+        words = variant(args.quick, args.until)
+        compare(args.against, args.repeats, words, args.out, args.scaled_to)
 
 
 if __name__ == "__main__":

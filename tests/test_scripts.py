@@ -83,7 +83,7 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     subprocess.run(
         [
             sys.executable, str(ROOT / "scripts" / "bench_paper.py"), "--quick", "--until", "1.35",
-            "--repeats", "1", "--against", "HEAD", "--out", str(tmp_path),
+            "--repeats", "1", "--against", "HEAD", "--scaled-to", "10", "--out", str(tmp_path),
         ],
         check=True, capture_output=True,
     )  # fmt: skip
@@ -114,6 +114,13 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
     assert comparison["pair_ratios"] == [round(ratio, 3)]
     assert f"Pair by pair: {ratio:.3f}" in markdown
+    # Scaled to a machine on which HEAD's history took 10 s: HEAD there by construction, the
+    # current tree by the ratio of the medians.
+    factor = comparison["scale"]["factor"]
+    assert factor == pytest.approx(10 / against["wall_median_s"])
+    assert f"| wall time median, scaled [s] | {10 * ratio:.1f} | 10.0 |" in markdown
+    command = current["command_median_s"] * factor
+    assert f"| the command median, scaled [s] | {command:.1f} |" in markdown
 
 
 def test_stability_judges_the_broken_body_against_the_reference():
