@@ -17,7 +17,9 @@ parameter, with axes labelled by name, meaning and unit.
 
 Whatever is missing (no CSV yet, rows cut short by a crash, VTUs named by ``fields.pvd`` but
 absent) is skipped with a log message. Matplotlib figures are built with ``Figure`` objects and
-never through ``pyplot``, so the caller's backend is left alone.
+never through ``pyplot``, so the caller's backend is left alone. Where the process may use two
+cores and can fork (Linux), the two mesh pictures are drawn in a forked process beside the
+others (:func:`drawing_processes`).
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import os
 import re
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -46,6 +49,7 @@ from ngat.results import Frame, field_series, read_fields, read_records
 
 __all__ = [
     "plot_results",
+    "drawing_processes",
     "read_energies",
     "offscreen_rendering_works",
     "energies_figure",
@@ -88,6 +92,44 @@ def read_energies(path: Path) -> dict[str, np.ndarray]:
     return columns
 
 
+def drawing_processes() -> int:
+    """Return the processes :func:`plot_results` draws with by default: 2 or 1.
+
+    Two where this process may use two cores or more and can fork safely (Linux): a forked
+    process inherits the fields already read and matplotlib already imported, and draws the
+    two mesh pictures (half of the drawing at the paper's example) beside the others. One
+    elsewhere.
+    """
+    if not sys.platform.startswith("linux"):
+        return 1
+    return 2 if len(os.sched_getaffinity(0)) > 1 else 1
+
+
+def _start_beside(draw: Callable[[], object]) -> int:
+    """Call ``draw`` in a forked process and return its process id.
+
+    The process leaves at once when ``draw`` returns (status 0) or raises (status 1, without
+    a message: :func:`_finish_beside` draws again here and so raises where the caller sees it).
+    """
+    pid = os.fork()
+    if pid == 0:
+        status = 1
+        try:
+            draw()
+            status = 0
+        finally:
+            os._exit(status)
+    return pid
+
+
+def _finish_beside(pid: int, draw: Callable[[], object]) -> None:
+    """Wait for the forked process of :func:`_start_beside`; call ``draw`` here if it failed."""
+    code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+    if code != 0:
+        log.debug("the forked drawing failed (exit status %d): drawing here", code)
+        draw()
+
+
 @functools.cache
 def offscreen_rendering_works() -> bool:
     """Return whether VTK can render off-screen here, tried once in a child process.
@@ -116,6 +158,7 @@ def plot_results(
     zoom: tuple[float, float, float] | None = None,
     slits: Sequence | None = None,
     renderer: str = "auto",
+    processes: int | None = None,
 ) -> list[Path]:
     """Draw the pictures of a finished or partial results folder.
 
@@ -139,6 +182,9 @@ def plot_results(
         the scene named in ``summary.json``, if it has any.
     renderer
         ``"pyvista"``, ``"matplotlib"`` or ``"auto"`` (pyvista if off-screen rendering works).
+    processes
+        2: the mesh pictures are drawn in a forked process while this one draws the others
+        (the same pictures, pixel for pixel); 1: all here. Default :func:`drawing_processes`.
 
     Returns
     -------
@@ -161,45 +207,104 @@ def plot_results(
             f"'{folder}' is a file, not a folder: give the results folder of a run (the folder "
             "that holds energies.csv)"
         )
-    written = []
     energies = None
     if (folder / "energies.csv").exists():
         energies = read_energies(folder / "energies.csv")
-        if len(energies.get("t", ())):
-            written.append(plot_energies(energies, folder / "energies.png"))
-        else:
+        if not len(energies.get("t", ())):
             log.info("%s: energies.csv has no complete row", folder)
+    rows = energies is not None and len(energies.get("t", ())) > 0
     frames = field_series(folder, energies)
-    if not written and not frames:
+    if not rows and not frames:
         raise PlotError(f"'{folder}' holds no energies.csv rows and no fields to plot")
     for old in folder.glob("v_t*.png"):
         old.unlink()
-    if not frames:
-        return written
+    while frames and (grid := read_fields(frames[-1])) is None:
+        frames.pop()
+    meshes = beside = None
+    if frames:
+        meshes = functools.partial(
+            plot_meshes, grid, frames[-1].t, folder, zoom, _scene_slits(folder, slits)
+        )
+        if (processes or drawing_processes()) > 1:
+            beside = _start_beside(meshes)
+    try:
+        written = [plot_energies(energies, folder / "energies.png")] if rows else []
+        if frames:
+            written += _plot_fields(grid, frames, times, folder, renderer)
+    except BaseException:
+        if beside is not None:
+            os.waitpid(beside, 0)  # its pictures are whole; this error goes on
+        raise
+    if beside is not None:
+        _finish_beside(beside, meshes)
+        written += [folder / name for name in MESH_PICTURES]
+    elif meshes is not None:
+        written += meshes()
+    log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
+    return written
+
+
+def _plot_fields(
+    grid: pyvista.UnstructuredGrid,
+    frames: list[Frame],
+    times: Sequence[float] | None,
+    folder: Path,
+    renderer: str,
+) -> list[Path]:
+    """Draw ``v_final.png`` (plane models: ``u_final.png``) and v at the chosen earlier frames.
+
+    ``grid`` is the last frame's VTU; ``times`` and ``renderer`` are :func:`plot_results`'s.
+    """
     if renderer == "auto":
         renderer = "pyvista" if offscreen_rendering_works() else "matplotlib"
         if renderer == "matplotlib":
             log.warning("VTK cannot render off-screen here: drawing v with matplotlib")
-    while frames and (grid := read_fields(frames[-1])) is None:
-        frames.pop()
-    if not frames:
-        return written
     final = frames[-1]
-    written.append(plot_field(grid, final.t, folder / "v_final.png", renderer))
+    written = [plot_field(grid, final.t, folder / "v_final.png", renderer)]
     if has_plane_displacement(grid):
         written.append(plot_displacement(grid, final.t, folder / "u_final.png", renderer))
     for frame in _chosen_frames(frames[:-1], times):
         if (snapshot := read_fields(frame)) is not None:
             path = folder / f"v_t{frame.t:.4f}.png"
             written.append(plot_field(snapshot, frame.t, path, renderer))
-    points, triangles = grid_triangles(grid)
-    written.append(plot_mesh(points, triangles, None, final.t, folder / "mesh_final.png"))
-    if zoom is None:
-        zoom = default_zoom(points, triangles, grid.point_data["v"], _scene_slits(folder, slits))
-    v = np.asarray(grid.point_data["v"])
-    written.append(plot_mesh(points, triangles, v, final.t, folder / "mesh_zoom.png", zoom))
-    log.debug("%s: wrote %s", folder, ", ".join(p.name for p in written))
     return written
+
+
+MESH_PICTURES = ("mesh_final.png", "mesh_zoom.png")
+"""The pictures of :func:`plot_meshes`."""
+
+
+def plot_meshes(
+    grid: pyvista.UnstructuredGrid,
+    t: float,
+    folder: Path,
+    zoom: tuple[float, float, float] | None,
+    slits: Sequence,
+) -> list[Path]:
+    """Draw :data:`MESH_PICTURES`: the whole mesh, and the window ``zoom`` over v.
+
+    Parameters
+    ----------
+    grid
+        The step's VTU with point data ``v``.
+    t
+        Load time, for the titles.
+    folder
+        Folder of the PNGs.
+    zoom
+        ``(x, y, r)`` of the window; ``None``: :func:`default_zoom` about the first slit's tip.
+    slits
+        The scene's slits, for the default zoom.
+    """
+    points, triangles = grid_triangles(grid)
+    v = np.asarray(grid.point_data["v"])
+    whole, window = (folder / name for name in MESH_PICTURES)
+    if zoom is None:
+        zoom = default_zoom(points, triangles, v, slits)
+    return [
+        plot_mesh(points, triangles, None, t, whole),
+        plot_mesh(points, triangles, v, t, window, zoom),
+    ]
 
 
 def _chosen_frames(frames: list[Frame], times: Sequence[float] | None) -> list[Frame]:

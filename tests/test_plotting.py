@@ -1,13 +1,23 @@
 """``ngat plot``: the pictures of a finished and of a partial quick two-slits run."""
 
+import logging
+import os
 import shutil
 
 import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from ngat import plotting
 from ngat.cli import main
-from ngat.plotting import PlotError, draw_bars, field_series, plot_results, read_energies
+from ngat.plotting import (
+    PlotError,
+    draw_bars,
+    drawing_processes,
+    field_series,
+    plot_results,
+    read_energies,
+)
 
 PICTURES = ["energies.png", "v_final.png", "mesh_final.png", "mesh_zoom.png"]
 
@@ -91,6 +101,46 @@ def test_fields_without_pvd_and_csv_without_rows(run_folder, tmp_path):
     last.write_bytes(last.read_bytes()[:100_000])  # a VTU cut short
     written = plot_results(folder, times=[])
     assert [p.name for p in written] == ["v_final.png", "mesh_final.png", "mesh_zoom.png"]
+
+
+@pytest.mark.skipif(drawing_processes() < 2, reason="draws in one process here")
+def test_mesh_pictures_drawn_beside_the_others_are_the_same_pixels(run_folder, tmp_path):
+    # Two processes (the default here) against one: the same list and the same pixels.
+    folders = [tmp_path / "one", tmp_path / "two"]
+    written = []
+    for folder, processes in zip(folders, (1, 2), strict=True):
+        shutil.copytree(run_folder, folder)
+        written.append(
+            plot_results(folder, times=[0.5], renderer="matplotlib", processes=processes)
+        )
+    assert [p.name for p in written[0]] == [p.name for p in written[1]]
+    assert [p.name for p in written[1]][-2:] == ["mesh_final.png", "mesh_zoom.png"]
+    for path in written[0]:
+        assert np.array_equal(imread(path), imread(folders[1] / path.name)), path.name
+
+
+@pytest.mark.skipif(drawing_processes() < 2, reason="draws in one process here")
+def test_mesh_pictures_are_drawn_here_when_the_forked_process_fails(
+    run_folder, tmp_path, monkeypatch, caplog
+):
+    # plot_mesh raises in the forked process only: this process draws the mesh pictures again.
+    parent = os.getpid()
+    drawn = plotting.plot_mesh
+
+    def fails_in_the_child(*args, **kwargs):
+        if os.getpid() != parent:
+            raise RuntimeError("the forked drawing fails")
+        return drawn(*args, **kwargs)
+
+    monkeypatch.setattr(plotting, "plot_mesh", fails_in_the_child)
+    folder = tmp_path / "run"
+    shutil.copytree(run_folder, folder)
+    with caplog.at_level(logging.DEBUG, logger="ngat.plotting"):
+        written = plot_results(folder, times=[], renderer="matplotlib", processes=2)
+    assert "the forked drawing failed (exit status 1): drawing here" in caplog.text
+    assert [p.name for p in written] == PICTURES
+    for name in PICTURES:
+        assert_picture(folder / name)
 
 
 def test_empty_folder_is_an_input_error(tmp_path):
