@@ -40,8 +40,8 @@ current/REV of the median wall times and that of each pair (less sensitive to th
 drift from one pair to the next).
 
 Another machine: ``--scaled-to S`` with ``--against REV`` states the seconds REV's load history
-took on a machine where a target was set (e.g. ``--against 6c4392c --scaled-to 47.8``: the
-default when the 30 s target of ``ngat run two-slits`` was set, whose history took 47.8 s
+took on a machine where a target was set (e.g. ``--against 6c4392c --scaled-to 47``: the
+default when the 30 s target of ``ngat run two-slits`` was set, whose history took 47 s alone
 there). Both checkouts' median wall and command are then also shown multiplied by S / REV's
 median wall here, the factor by which that machine was faster than this one on REV's code:
 what each would take there, as far as the two checkouts' work slows down alike.
