@@ -29,13 +29,16 @@ import json
 import logging
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import psutil
 import pyvista
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
@@ -122,9 +125,38 @@ def _start_beside(draw: Callable[[], object]) -> int:
     return pid
 
 
+STALL_S = 10.0
+"""Seconds in which the forked drawing used no processor time before it counts as stuck.
+
+A fork copies only the thread that forks: a lock another thread of this process held at that
+moment (matplotlib's, in a program that draws in two threads) is never released in the child.
+"""
+POLL_S = 0.01
+"""Seconds between two looks at the forked drawing."""
+
+
 def _finish_beside(pid: int, draw: Callable[[], object]) -> None:
-    """Wait for the forked process of :func:`_start_beside`; call ``draw`` here if it failed."""
-    code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+    """Wait for the forked process of :func:`_start_beside`; call ``draw`` here if it failed.
+
+    A process that has used no processor time for :data:`STALL_S` seconds is killed and its
+    pictures are drawn here as well.
+    """
+    child, used, since = psutil.Process(pid), -1.0, time.monotonic()
+    while (done := os.waitpid(pid, os.WNOHANG))[0] == 0:
+        try:
+            now = sum(child.cpu_times()[:2])
+        except psutil.Error:  # it has just ended
+            now = used + 1
+        if now > used:
+            used, since = now, time.monotonic()
+        elif time.monotonic() - since > STALL_S:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            log.debug("the forked drawing made no progress for %g s: drawing here", STALL_S)
+            draw()
+            return
+        time.sleep(POLL_S)
+    code = os.waitstatus_to_exitcode(done[1])
     if code != 0:
         log.debug("the forked drawing failed (exit status %d): drawing here", code)
         draw()

@@ -3,6 +3,7 @@
 import logging
 import os
 import shutil
+import time
 
 import numpy as np
 import pytest
@@ -138,6 +139,31 @@ def test_mesh_pictures_are_drawn_here_when_the_forked_process_fails(
     with caplog.at_level(logging.DEBUG, logger="ngat.plotting"):
         written = plot_results(folder, times=[], renderer="matplotlib", processes=2)
     assert "the forked drawing failed (exit status 1): drawing here" in caplog.text
+    assert [p.name for p in written] == PICTURES
+    for name in PICTURES:
+        assert_picture(folder / name)
+
+
+@pytest.mark.skipif(drawing_processes() < 2, reason="draws in one process here")
+def test_a_stuck_forked_drawing_is_stopped_and_drawn_here(
+    run_folder, tmp_path, monkeypatch, caplog
+):
+    # plot_mesh waits without end in the forked process only (as on a lock held at the fork).
+    parent = os.getpid()
+    drawn = plotting.plot_mesh
+
+    def stuck_in_the_child(*args, **kwargs):
+        while os.getpid() != parent:
+            time.sleep(1)
+        return drawn(*args, **kwargs)
+
+    monkeypatch.setattr(plotting, "plot_mesh", stuck_in_the_child)
+    monkeypatch.setattr(plotting, "STALL_S", 0.5)
+    folder = tmp_path / "run"
+    shutil.copytree(run_folder, folder)
+    with caplog.at_level(logging.DEBUG, logger="ngat.plotting"):
+        written = plot_results(folder, times=[], renderer="matplotlib", processes=2)
+    assert "the forked drawing made no progress for 0.5 s: drawing here" in caplog.text
     assert [p.name for p in written] == PICTURES
     for name in PICTURES:
         assert_picture(folder / name)
