@@ -33,6 +33,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import SimpleNamespace
@@ -114,7 +115,11 @@ def _start_beside(draw: Callable[[], object]) -> int:
     The process leaves at once when ``draw`` returns (status 0) or raises (status 1, without
     a message: :func:`_finish_beside` draws again here and so raises where the caller sees it).
     """
-    pid = os.fork()
+    with warnings.catch_warnings():
+        # Python 3.12 and later warn of a fork with other threads running: the child only
+        # draws, and one stuck on a lock those threads held is stopped (_finish_beside).
+        warnings.filterwarnings("ignore", ".*multi-threaded.*fork", DeprecationWarning)
+        pid = os.fork()
     if pid == 0:
         status = 1
         try:
