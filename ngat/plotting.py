@@ -247,9 +247,9 @@ def plot_results(
     energies = None
     if (folder / "energies.csv").exists():
         energies = read_energies(folder / "energies.csv")
-        if not len(energies.get("t", ())):
-            log.info("%s: energies.csv has no complete row", folder)
     rows = energies is not None and len(energies.get("t", ())) > 0
+    if energies is not None and not rows:
+        log.info("%s: energies.csv has no complete row", folder)
     frames = field_series(folder, energies)
     if not rows and not frames:
         raise PlotError(f"'{folder}' holds no energies.csv rows and no fields to plot")
@@ -259,9 +259,8 @@ def plot_results(
         frames.pop()
     meshes = beside = None
     if frames:
-        meshes = functools.partial(
-            plot_meshes, grid, frames[-1].t, folder, zoom, _scene_slits(folder, slits)
-        )
+        scene_slits = _scene_slits(folder, slits) if zoom is None else ()
+        meshes = functools.partial(plot_meshes, grid, frames[-1].t, folder, zoom, scene_slits)
         if (processes or drawing_processes()) > 1:
             beside = _start_beside(meshes)
     try:
