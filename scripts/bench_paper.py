@@ -17,7 +17,8 @@ history and of the pictures, drawn as ``ngat run`` draws them
 (``ngat.experiment.pictures_on_exit``), the start-up before the run (importing ngat, NGSolve
 and SciPy and loading the scene, counted from the script's start) and the command's total,
 start-up + run + pictures: what ``ngat run two-slits`` takes, less the interpreter's own start
-of some 20 ms; seconds per timed phase, peak memory, AM iterations in total and in the growth
+of some 20 ms; the processor time of the load history, all threads, user and system; seconds
+per timed phase, peak memory, AM iterations in total and in the growth
 window, linear solves, fracture time, E(1.0), final elements, element sizes, the wall of the
 steps before the break step, of it and after it) and ``phases.png``;
 the run's results folder in ``run/``.
@@ -32,7 +33,7 @@ checkout's root: the two versions never share a process and are measured by the 
 through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision has. A figure
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max) of the load
-history, with the pictures and of the whole command, the share
+history, with the pictures and of the whole command, the median processor time, the share
 of the wall time per phase ("–" where a checkout does not time a phase), the median walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
@@ -115,6 +116,12 @@ def stage_walls(records: list[dict], fracture: float | None) -> dict[str, float 
     return {stage: round(wall, 2) for stage, wall in walls.items()}
 
 
+def processor_time() -> float:
+    """Return the processor seconds this process has used so far, all threads, user and system."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
 def measure(quick: bool, until: float | None, folder: Path) -> dict:
     """Run two-slits with the ngat on the path and return its figures (``None``: not given)."""
     import ngat
@@ -126,10 +133,12 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     if until is not None:
         times = times[times <= until + 1e-12]
     drawing = pictures_on_exit(folder, scene)
+    processor = processor_time()
     begin = time.perf_counter()
     with drawing or contextlib.nullcontext():
         result = run(scene, parameters, times, folder)
         end = time.perf_counter()
+        processor = processor_time() - processor
     wall = end - begin
     pictures = None if drawing is None else round(time.perf_counter() - end, 2)
     start = begin - STARTED
@@ -140,6 +149,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     end = fracture if fracture is not None else float("inf")
     return {
         "wall_s": round(wall, 2),
+        "processor_s": round(processor, 2),
         "pictures_s": pictures,
         "start_s": round(start, 2),
         "command_s": optional(lambda: round(start + wall + pictures, 2)),
@@ -273,6 +283,9 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
         "command_median_s": optional(
             lambda: round(statistics.median(b["command_s"] for b in benches), 2)
         ),
+        "processor_median_s": optional(
+            lambda: round(statistics.median(b["processor_s"] for b in benches), 2)
+        ),
         "phase_share": {
             p: round(statistics.median(b["phases_s"][p] / b["wall_s"] for b in benches), 3)
             if all(p in (b.get("phases_s") or {}) for b in benches)
@@ -340,6 +353,10 @@ def table(comparison: dict) -> str:
     line(
         "the command: start-up, run, pictures, median [s]",
         lambda r: cell(r.get("command_median_s"), 1),
+    )
+    line(
+        "processor time of the load history, all threads, median [s]",
+        lambda r: cell(r.get("processor_median_s"), 1),
     )
     for stage in STAGES:
         line(f"{stage}, median [s]", lambda r, s=stage: cell(r["stage_median_s"][s], 1))

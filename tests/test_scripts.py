@@ -100,6 +100,9 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     parts = run["start_s"] + run["wall_s"] + run["pictures_s"]
     assert run["command_s"] == pytest.approx(parts, abs=0.02)  # each part rounded to 0.01 s
     assert current["command_median_s"] == run["command_s"]
+    # Its processor time counts both cores' work, so it may exceed the wall, but not twice over.
+    assert 0.5 * run["wall_s"] < run["processor_s"] < 2.05 * run["wall_s"]
+    assert current["processor_median_s"] == run["processor_s"]
     # No break step before t = 1.35: every step's wall is before it.
     stages = current["stage_median_s"]
     assert stages["before the break"] > 0
@@ -110,6 +113,7 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert markdown.startswith("two-slits --quick --until 1.35,")
     assert "| fracture time |" in markdown
     assert "| the command: start-up, run, pictures, median [s] |" in markdown
+    assert "| processor time of the load history, all threads, median [s] |" in markdown
     assert "| break step, median [s] | – | – |" in markdown
     ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
     assert comparison["pair_ratios"] == [round(ratio, 3)]
