@@ -20,7 +20,8 @@ run on one thread whatever the count: :data:`ngat.pardiso.TWO_LEVEL`).
 MKL therefore gets :func:`factorisation_threads`, the cores the process may use unless
 ``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :func:`oversubscription`
 warns when other work keeps those cores busy. Between factorisations their OpenMP threads
-sleep at once instead of spinning for Intel's default 200 ms (:data:`SPIN_MS`), so that the
+sleep after 5 ms instead of spinning for Intel's default 200 ms (:data:`SPIN_MS`; in the teams of
+the main thread and of the background worker, :func:`ngat.pardiso.in_background`), so that the
 cores are free for the rest of the run, and Netgen's bisection (``mesh.Refine()``) runs on
 NGSolve's TaskManager with as many threads (:func:`refinement_threads`): it gave the same
 meshes, vertex numbers and prolongated fields with one thread and with two (the paper's break
@@ -38,6 +39,8 @@ from typing import Any
 import ngsolve
 import psutil
 from threadpoolctl import threadpool_info, threadpool_limits
+
+from ngat.pardiso import in_background
 
 __all__ = [
     "FixedThreads",
@@ -57,18 +60,19 @@ BLAS_THREADS = 1
 MKL."""
 
 
-SPIN_MS = 0
+SPIN_MS = 5
 """Milliseconds the OpenMP threads of MKL wait, spinning, for the next parallel region before
 they sleep (``KMP_BLOCKTIME``; Intel's default is 200) while a run has several factorisation
 threads, unless ``KMP_BLOCKTIME`` is set. A thread spinning for 200 ms after each solve holds
 the core that the refinement's threads (:func:`refinement_threads`) and the rest of the
 iteration could use: the paper's break step spent 4.0 s in ``mesh.Refine()`` on two threads
 beside it, against 2.9 s on one thread and 1.6 s on two with threads that sleep at once.
-Spinning even 5 ms, in a run whose main thread, background factorisations (:mod:`ngat.pardiso`)
-and OpenMP worker share two cores, cost the paper's example 7 s of kernel time (the spinning
-thread's yields) and 300–500 thousand involuntary context switches; sleeping at once, 3 s and
-2.5 thousand, about 12 % less processor time and the same wall (0.98 of it, within the hour's
-spread), although a wake-up costs about 0.4 ms per back-substitution on two threads."""
+Sleeping at once costs a wake-up of about 0.4 ms per back-substitution (4.7 against 4.3 ms at
+73k DOFs); after 5 ms they do not (4.2 ms), and factorisations take the same time. The
+setting belongs to the thread that sets it and the teams it starts: the background worker,
+whose METIS orderings run on MKL's threads, gets it too (:meth:`FixedThreads.spin`). With
+Intel's 200 ms there, the paper's example spent 7 s of kernel time in the spinning thread's
+yields and 300–500 thousand involuntary context switches."""
 
 
 def factorisation_threads() -> int:
@@ -166,7 +170,12 @@ class FixedThreads:
             self._openmp = _intel_openmp()
         if self._openmp is not None:
             self._spin = self._openmp.kmp_get_blocktime()
-            self._openmp.kmp_set_blocktime(SPIN_MS)
+            self.spin(SPIN_MS)
+
+    def spin(self, milliseconds: int) -> None:
+        """Set the OpenMP spin (:data:`SPIN_MS`) of the main thread's and the worker's teams."""
+        self._openmp.kmp_set_blocktime(milliseconds)
+        in_background(self._openmp.kmp_set_blocktime, milliseconds).result()
 
     def summary(self) -> dict[str, Any]:
         """Return the thread counts in force, per pool and per library loaded."""
@@ -190,4 +199,4 @@ class FixedThreads:
         self._limits.restore_original_limits()
         ngsolve.SetNumThreads(self._ngsolve)
         if self._openmp is not None:
-            self._openmp.kmp_set_blocktime(self._spin)
+            self.spin(self._spin)
