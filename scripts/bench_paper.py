@@ -133,12 +133,12 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
     if until is not None:
         times = times[times <= until + 1e-12]
     drawing = pictures_on_exit(folder, scene)
-    processor = processor_time()
+    used = processor_time()
     begin = time.perf_counter()
     with drawing or contextlib.nullcontext():
         result = run(scene, parameters, times, folder)
         end = time.perf_counter()
-        processor = processor_time() - processor
+        processor = processor_time() - used
     wall = end - begin
     pictures = None if drawing is None else round(time.perf_counter() - end, 2)
     start = begin - STARTED
