@@ -55,7 +55,7 @@ from ngat.results import RunResult
 from ngat.scene import Scene
 from ngat.state import ATState
 from ngat.strategies import nonlinear_strategy
-from ngat.threads import FixedThreads, oversubscription
+from ngat.threads import CoreUse, FixedThreads
 from ngat.timing import PhaseTimer
 
 __all__ = ["run"]
@@ -252,9 +252,7 @@ def _run_locked(
         summary.setdefault("resumed_after_step", []).append(checkpoint.step)
     diagnostics = Diagnostics(parameters.solver.on_problem)
     diagnostics.problems.extend(summary.get("diagnostics", []))
-    threads = FixedThreads()
-    if warning := oversubscription(threads.factorisation):
-        log.warning(warning)
+    threads, cores = FixedThreads(), CoreUse()
     try:
         summary["threads"] = threads.summary()
         writer.write_summary(summary)
@@ -280,6 +278,8 @@ def _run_locked(
             else None
         )
         remesher = tip_remesher(scene, parameters)
+        if warning := cores.warning(threads.factorisation):  # sampled while the run set up
+            log.warning(warning)
         log.info("scene %s: %d elements, %d load steps", scene.name, mesh.ne, len(times))
         checkpointed = time.perf_counter()
         for k, t in enumerate(times):

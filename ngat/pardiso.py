@@ -283,7 +283,7 @@ def wait_background() -> None:
     """Wait until no factorisation runs in the background, before work on several threads.
 
     Threads that wait for each other at every step (MKL's, NGSolve's TaskManager) slow down
-    many times when a core they need is busy (:func:`ngat.threads.oversubscription`).
+    many times when a core they need is busy (:class:`ngat.threads.CoreUse`).
     """
     if _worker.cache_info().currsize:
         _worker().submit(int).result()

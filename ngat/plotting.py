@@ -37,6 +37,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import SimpleNamespace
+from typing import NamedTuple
 
 import numpy as np
 import psutil
@@ -332,15 +333,42 @@ def plot_meshes(
     slits
         The scene's slits, for the default zoom.
     """
-    points, triangles = grid_triangles(grid)
+    mesh = MergedMesh.of(*grid_triangles(grid))
     v = np.asarray(grid.point_data["v"])
     whole, window = (folder / name for name in MESH_PICTURES)
     if zoom is None:
-        zoom = default_zoom(points, triangles, v, slits)
-    return [
-        plot_mesh(points, triangles, None, t, whole),
-        plot_mesh(points, triangles, v, t, window, zoom),
-    ]
+        zoom = default_zoom(mesh, v, slits)
+    return [plot_mesh(mesh, None, t, whole), plot_mesh(mesh, v, t, window, zoom)]
+
+
+class MergedMesh(NamedTuple):
+    """A VTU's triangles, and the mesh with its coincident points merged, and that mesh's edges.
+
+    The two faces of a slit have points of their own at the same places; merged, the slit's
+    edges are drawn once. Built once for the mesh pictures (:func:`plot_meshes`): the merge
+    and the edges took 90 ms at 139k elements, three times over before.
+    """
+
+    points: np.ndarray
+    """(n, 2) points of the VTU."""
+    triangles: np.ndarray
+    """(ne, 3) the VTU's triangles (point numbers)."""
+    coords: np.ndarray
+    """(nv, 2) distinct points."""
+    elements: np.ndarray
+    """(ne, 3) the triangles in numbers of ``coords``."""
+    merged: np.ndarray
+    """(n,) the number in ``coords`` of every point."""
+    edges: np.ndarray
+    """(n_edges, 2) the edges of ``elements``, smaller number first."""
+
+    @classmethod
+    def of(cls, points: np.ndarray, triangles: np.ndarray) -> MergedMesh:
+        """Merge the coincident points of a VTU's mesh (:func:`ngat.rendering.grid_triangles`)."""
+        coords, merged = np.unique(points, axis=0, return_inverse=True)
+        merged = merged.reshape(-1)
+        elements = merged[triangles]
+        return cls(points, triangles, coords, elements, merged, mesh_edges(elements))
 
 
 def _chosen_frames(frames: list[Frame], times: Sequence[float] | None) -> list[Frame]:
@@ -471,22 +499,22 @@ def plot_field(grid: pyvista.UnstructuredGrid, t: float, path: Path, renderer: s
 
 
 def default_zoom(
-    points: np.ndarray, triangles: np.ndarray, v: np.ndarray, slits: Sequence = ()
+    mesh: MergedMesh, v: np.ndarray, slits: Sequence = ()
 ) -> tuple[float, float, float]:
     """Return the default window ``(x, y, r)`` of ``mesh_zoom.png`` (see :func:`plot_results`).
 
     Parameters
     ----------
-    points, triangles
-        The VTU's points and triangles (points repeated per element, as NGSolve writes them).
+    mesh
+        The VTU's mesh (points repeated per element, as NGSolve writes them, or per face of a
+        slit, as ngat does), merged.
     v
-        Phase field at the points.
+        Phase field at the VTU's points.
     slits
         Slit segments ``(mouth, tip)``; may be empty.
     """
+    points, triangles, coords, elements = mesh.points, mesh.triangles, mesh.coords, mesh.elements
     r = ZOOM_FRACTION * float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
-    coords, inverse = np.unique(points, axis=0, return_inverse=True)
-    elements = inverse.reshape(-1)[triangles]
     xy = coords[elements]
     diameter = np.linalg.norm(xy[:, [1, 2, 0]] - xy, axis=2).max(axis=1)
     if len(slits):
@@ -498,11 +526,11 @@ def default_zoom(
             nv=len(coords),
             ne=len(elements),
             diameter=diameter,
-            edges=mesh_edges(elements),
+            edges=mesh.edges,
             size_at=lambda point: vertex_size(coords, elements, diameter, point),
         )
         vertex_v = np.zeros(len(coords))
-        vertex_v[inverse.reshape(-1)] = v
+        vertex_v[mesh.merged] = v
         x, y = crack_tips(arrays, vertex_v, [slits[0]], CRACK_THRESHOLD)[0]
         return x, y, r
     cracked = (np.asarray(v)[triangles] < CRACK_THRESHOLD).any(axis=1)
@@ -548,8 +576,7 @@ def draw_segments(ax, segments: np.ndarray, linewidth: np.ndarray, color) -> Non
 
 
 def plot_mesh(
-    points: np.ndarray,
-    triangles: np.ndarray,
+    mesh: MergedMesh,
     v: np.ndarray | None,
     t: float,
     path: Path,
@@ -559,8 +586,8 @@ def plot_mesh(
 
     Parameters
     ----------
-    points, triangles
-        The VTU's points and triangles.
+    mesh
+        The VTU's mesh, merged.
     v
         Phase field at the points, drawn under the edges; ``None`` for edges only.
     t
@@ -570,9 +597,8 @@ def plot_mesh(
     zoom
         Centre and half-width of the window; ``None`` for the whole body.
     """
-    coords, inverse = np.unique(points, axis=0, return_inverse=True)
-    edges = mesh_edges(inverse.reshape(-1)[triangles])
-    segments = coords[edges]
+    points, triangles = mesh.points, mesh.triangles
+    segments = mesh.coords[mesh.edges]
     if zoom is None:
         lo, hi = points.min(axis=0), points.max(axis=0)
     else:

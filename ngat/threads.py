@@ -18,7 +18,7 @@ gave the same bits with one thread and with two in every comparison made
 are faster on the example's meshes (the half-steps' definite matrices and METIS's orderings
 run on one thread whatever the count: :data:`ngat.pardiso.TWO_LEVEL`).
 MKL therefore gets :func:`factorisation_threads`, the cores the process may use unless
-``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :func:`oversubscription`
+``MKL_NUM_THREADS`` says otherwise (a Dask worker sets it to 1); :class:`CoreUse`
 warns when other work keeps those cores busy. Between factorisations their OpenMP threads
 sleep after 5 ms instead of spinning for Intel's default 200 ms (:data:`SPIN_MS`; in the teams of
 the main thread and of the background worker, :func:`ngat.pardiso.in_background`), so that the
@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -47,7 +48,7 @@ __all__ = [
     "NGSOLVE_THREADS",
     "BLAS_THREADS",
     "factorisation_threads",
-    "oversubscription",
+    "CoreUse",
     "refinement_threads",
     "SPIN_MS",
 ]
@@ -91,30 +92,71 @@ def factorisation_threads() -> int:
     return int(setting)
 
 
-def oversubscription(factorisation: int, interval: float = 0.1) -> str | None:
-    """Return a warning if other work keeps busy the cores the factorisation's threads need.
+MIN_INTERVAL = 0.1
+"""Seconds :class:`CoreUse` samples at least (the kernel counts processor time in 10 ms ticks)."""
 
-    The processors' use is sampled over ``interval`` seconds (psutil), before the run computes
-    anything. Threads of one factorisation wait for each other at every step of it: two quick
-    runs side by side with two threads each took 58 s each, against 24 s with one.
 
-    Returns
-    -------
-    str or None
-        The warning, naming the remedy, or ``None`` if the cores are free (or one thread).
+def _busy(times: Any) -> float:
+    """Return a core's busy seconds from its ``psutil.cpu_times`` (not idle, stolen included).
+
+    Guest time is already counted in user time, as psutil's ``cpu_percent`` counts it.
     """
-    if factorisation < 2:
-        return None
-    cores = sorted(os.sched_getaffinity(0))
-    usage = psutil.cpu_percent(interval=interval, percpu=True)
-    busy = sum(usage[core] for core in cores if core < len(usage)) / 100
-    if busy <= len(cores) - factorisation + 0.5:
-        return None
-    return (
-        f"{busy:.1f} of {len(cores)} cores are busy with other work, and the factorisation runs "
-        f"on {factorisation} threads that wait for each other: runs side by side take several "
-        "times longer each. Set MKL_NUM_THREADS=1 for runs side by side (ngat sweep does)."
-    )
+    guest = getattr(times, "guest", 0.0) + getattr(times, "guest_nice", 0.0)
+    return sum(times) - guest - times.idle - getattr(times, "iowait", 0.0)
+
+
+class CoreUse:
+    """How busy other work keeps the cores of this process, from now until :meth:`warning`.
+
+    Threads of one factorisation wait for each other at every step of it: two quick runs side
+    by side with two threads each took 58 s each, against 24 s with one. The sample runs
+    while the run sets up (its mesh and operators) instead of pausing it: the cores' busy time
+    (psutil) less this process's own processor time, over the wall time between.
+
+    Parameters
+    ----------
+    min_interval
+        Shortest sample [s]: :meth:`other_work` waits for the rest if asked sooner.
+    """
+
+    def __init__(self, min_interval: float = MIN_INTERVAL):
+        self.cores = sorted(os.sched_getaffinity(0))
+        self.min_interval = min_interval
+        self._start = self._sample()
+
+    def _sample(self) -> tuple[float, float, float]:
+        """Return the wall clock, the cores' busy seconds and this process's processor seconds."""
+        per_core = psutil.cpu_times(percpu=True)
+        busy = sum(_busy(per_core[core]) for core in self.cores if core < len(per_core))
+        own = psutil.Process().cpu_times()
+        return time.perf_counter(), busy, own.user + own.system
+
+    def other_work(self) -> float:
+        """Return the cores other work kept busy on average since the sample began."""
+        if (rest := self.min_interval - (time.perf_counter() - self._start[0])) > 0:
+            time.sleep(rest)
+        (begin, busy_before, own_before), (end, busy, own) = self._start, self._sample()
+        return max(0.0, (busy - busy_before) - (own - own_before)) / (end - begin)
+
+    def warning(self, factorisation: int) -> str | None:
+        """Return a warning if other work keeps busy the cores the factorisation's threads need.
+
+        Returns
+        -------
+        str or None
+            The warning, naming the remedy, or ``None`` if the cores are free (or one thread).
+        """
+        if factorisation < 2:
+            return None
+        busy = self.other_work()
+        if busy <= len(self.cores) - factorisation + 0.5:
+            return None
+        return (
+            f"{busy:.1f} of {len(self.cores)} cores are busy with other work, and the "
+            f"factorisation runs on {factorisation} threads that wait for each other: runs side "
+            "by side take several times longer each. Set MKL_NUM_THREADS=1 for runs side by "
+            "side (ngat sweep does)."
+        )
 
 
 @contextmanager

@@ -13,12 +13,15 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
+from types import SimpleNamespace
 
 import numpy as np
+import psutil
 import pytest
 
 from ngat import pardiso
-from ngat.threads import SPIN_MS, FixedThreads, _intel_openmp, refinement_threads
+from ngat.threads import SPIN_MS, CoreUse, FixedThreads, _intel_openmp, refinement_threads
 
 SCENE = """
     import dataclasses
@@ -92,18 +95,57 @@ def test_a_bad_thread_count_is_named(monkeypatch, setting):
         FixedThreads()
 
 
+class _Machine:
+    """Processor times that a test sets: each core's busy seconds, this process's own."""
+
+    times = type(psutil.cpu_times())
+
+    def __init__(self, cores):
+        self.busy, self.own = dict.fromkeys(range(max(cores) + 1), 0.0), 0.0
+
+    def cpu_times(self, percpu):
+        zero = dict.fromkeys(self.times._fields, 0.0)
+        return [self.times(**{**zero, "user": busy, "idle": 1e6}) for busy in self.busy.values()]
+
+    def process(self):
+        return SimpleNamespace(cpu_times=lambda: SimpleNamespace(user=self.own, system=0.0))
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="two threads need two cores")
 def test_a_busy_machine_is_named_when_the_factorisation_has_several_threads(monkeypatch):
     import ngat.threads
 
     cores = sorted(os.sched_getaffinity(0))
-    busy = {core: 100.0 for core in range(max(cores) + 1)}
-    monkeypatch.setattr(ngat.threads.psutil, "cpu_percent", lambda **kw: list(busy.values()))
-    message = ngat.threads.oversubscription(2)
+    machine = _Machine(cores)
+    monkeypatch.setattr(ngat.threads.psutil, "cpu_times", machine.cpu_times)
+    monkeypatch.setattr(ngat.threads.psutil, "Process", machine.process)
+
+    def sampled(other, own):
+        """Return the warning after every core ran ``other`` and this process ``own`` more."""
+        use = CoreUse(min_interval=0.0)
+        begin = time.perf_counter()
+        time.sleep(0.05)
+        wall = time.perf_counter() - begin
+        for core in machine.busy:
+            machine.busy[core] += (other + own / len(cores)) * wall
+        machine.own += own * wall
+        return use.warning(2), use
+
+    message, use = sampled(other=1.0, own=0.0)  # every core busy with other work
     assert message is not None and "MKL_NUM_THREADS=1" in message
-    assert ngat.threads.oversubscription(1) is None  # one thread waits for nobody
-    busy = dict.fromkeys(busy, 0.0)
-    assert ngat.threads.oversubscription(2) is None
+    assert use.warning(1) is None  # one thread waits for nobody
+    # This process's own threads keep the cores as busy: no other work.
+    assert sampled(other=0.0, own=len(cores))[0] is None
+    assert sampled(other=0.0, own=0.0)[0] is None
+    # Half of every core: beyond the half core the second factorisation thread may lose.
+    assert sampled(other=0.5, own=1.0)[0] is not None
+
+
+def test_the_cores_use_is_sampled_for_at_least_its_interval():
+    begin = time.perf_counter()
+    other = CoreUse(min_interval=0.1).other_work()
+    assert time.perf_counter() - begin >= 0.1
+    assert 0.0 <= other <= len(os.sched_getaffinity(0)) + 0.1
 
 
 def _refined(threads):
