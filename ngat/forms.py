@@ -561,7 +561,16 @@ class MeshArrays:
         last bit, without its (ne, 3) gather (0.41 against 0.58 ms for the three gathered
         columns at 114k elements).
         """
-        return (self._incidence.T @ values) / 3
+        return (self._element_vertex @ values) / 3
+
+    @cached_property
+    def _element_vertex(self) -> csr_matrix:
+        """Element–vertex incidence (ne × nv): :attr:`_incidence` transposed once per mesh.
+
+        The transpose shares its arrays; ``.T`` at every call built a new matrix object (0.2 s
+        of the paper's example, in 1,706 calls).
+        """
+        return self._incidence.T
 
     @cached_property
     def centroid(self) -> np.ndarray:
