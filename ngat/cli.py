@@ -13,6 +13,7 @@ with one line saying how to continue it and the shell's status for a signal, 128
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import shlex
@@ -37,7 +38,7 @@ from ngat.results import RunResult
 from ngat.scene import SceneNotFound, SceneTimesError, load_scene, scene_names
 from ngat.state import SceneError
 
-__all__ = ["main"]
+__all__ = ["main", "console"]
 
 INPUT_ERRORS = (
     SceneNotFound,
@@ -381,5 +382,19 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger().removeHandler(handler)
 
 
+def console() -> None:
+    """Run the ``ngat`` command (:func:`main`) and end the process with its status.
+
+    The process ends with the command, so its objects are first frozen out of the cycle
+    collector (``gc.freeze``): the interpreter's exit otherwise searches every object still
+    alive (the libraries' modules, the last mesh and fields) for cycles, 0.2–0.4 s after the
+    paper's example, against 0.06–0.2 s frozen. :func:`main` itself leaves the collector
+    alone: tests and scripts call it many times in one process.
+    """
+    status = main()
+    gc.freeze()
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

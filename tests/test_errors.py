@@ -211,3 +211,20 @@ def test_a_parameter_given_twice_is_refused():
     assert parse_settings(["eps=0.05", "tol=0.3"]) == {"eps": "0.05", "tol": "0.3"}
     with pytest.raises(ParameterError, match="'eps' twice"):
         parse_settings(["eps=0.05", "eps=0.025"])
+
+
+def test_the_command_exits_with_the_status_of_main_its_objects_frozen(monkeypatch, capsys):
+    # The console script's exit skips the cycle search over what the run left alive.
+    import gc
+
+    from ngat.cli import console
+
+    monkeypatch.setattr(sys, "argv", ["ngat", "run", "no-such-scene"])
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console()
+        assert exit_.value.code == 2
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+    assert "unknown scene 'no-such-scene'" in capsys.readouterr().err
