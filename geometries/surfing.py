@@ -577,15 +577,18 @@ def steady_rates(times, tip_x, surface) -> dict[str, float]:
     quantisation of the tip position to the mesh. ``stick_slip`` is the standard deviation of
     the tip's advance per step divided by its mean: 0 for a crack that advances the same in
     every step; a crack that is held and then jumps scatters, and the fitted speed of a short
-    window then depends on where the window ends.
+    window then depends on where the window ends. A tip that does not advance has speed 0 and
+    no toughness or stick–slip (NaN).
 
     Parameters
     ----------
     times, tip_x, surface
         Load times, crack tip x and surface energy S at the steps of the window.
     """
-    speed = np.polyfit(times, tip_x, 1)[0]
     advance = np.diff(tip_x)
+    if not np.any(advance):
+        return {"speed": 0.0, "toughness": float("nan"), "stick_slip": float("nan")}
+    speed = np.polyfit(times, tip_x, 1)[0]
     return {
         "speed": float(speed),
         "toughness": float(np.polyfit(times, surface, 1)[0] / speed),

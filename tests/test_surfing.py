@@ -7,6 +7,7 @@ the imposed speed V and the surface energy grows at G_eff per unit crack advance
 """
 
 import importlib.util
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,15 @@ def test_steady_rates_of_a_steady_and_of_a_stick_slip_track():
     rates = surfing.steady_rates(times, jumps, 1.05 * jumps)
     assert rates["stick_slip"] == pytest.approx(0.5)
     assert rates["speed"] == pytest.approx(0.4, rel=0.03)
+
+
+def test_steady_rates_of_a_held_tip_are_nan_without_a_warning():
+    times = 0.03 * np.arange(13)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rates = surfing.steady_rates(times, np.full(13, 0.5), np.full(13, 0.2))
+    assert rates["speed"] == 0.0
+    assert np.isnan(rates["toughness"]) and np.isnan(rates["stick_slip"])
 
 
 def test_crack_starts_to_grow_at_the_effective_toughness(tmp_path):
