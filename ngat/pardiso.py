@@ -32,6 +32,7 @@ from ngsolve import BitArray
 from ngsolve.la import BaseMatrix, BaseVector, SparseMatrixd
 
 from ngat.forms import sparse_from_coo
+from ngat.timing import linear_solver
 
 __all__ = [
     "AVAILABLE",
@@ -205,18 +206,21 @@ class Pardiso:
             )
 
     def _call(self, phase: int, slot: int = 1) -> None:
+        """Run PARDISO's ``phase`` on ``slot``, timed on :data:`ngat.timing.linear_solver`."""
         values = self._values[slot - 1]
         arrays = (values, self._indptr, self._indices, self.ordering, self._rhs, self._out)
         factors = (len(self._values), slot)
         if not self._sequential:
             wait_background()  # MKL's threads need both cores
-            _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
+            with linear_solver():
+                _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
             return
         # 0: the global count, MKL's threads (ngat.threads.FixedThreads), for METIS alone.
         metis = phase == 11 and self._threaded_ordering
         threads = _MKL.MKL_Set_Num_Threads_Local(0 if metis else 1)
         try:
-            _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
+            with linear_solver():
+                _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
         finally:
             _MKL.MKL_Set_Num_Threads_Local(threads)
 

@@ -18,9 +18,10 @@ history and of the pictures, drawn as ``ngat run`` draws them
 and SciPy and loading the scene, counted from the script's start) and the command's total,
 start-up + run + pictures: what ``ngat run two-slits`` takes, less the interpreter's own start
 of some 20 ms; the processor time of the load history, all threads, user and system; seconds
-per timed phase, peak memory, AM iterations in total and in the growth
-window, linear solves, fracture time, E(1.0), final elements, element sizes, the wall of the
-steps before the break step, of it and after it) and ``phases.png``;
+per timed phase and with a linear solver under way on either thread (the factorisations that
+run in the background, behind the estimators, count there), peak memory, AM iterations in
+total and in the growth window, linear solves, fracture time, E(1.0), final elements, element
+sizes, the wall of the steps before the break step, of it and after it) and ``phases.png``;
 the run's results folder in ``run/``.
 
 Comparison: ``--against REV`` (e.g. ``HEAD~5``) checks REV out in a temporary git worktree
@@ -34,7 +35,8 @@ through ``ngat.driver.run`` and ``ngat.scene.load_scene``, which every revision 
 an older revision cannot give is reported as "–". Output in ``--out``: ``compare.md`` (also
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max) of the load
 history, with the pictures and of the whole command, the median processor time, the share
-of the wall time per phase ("–" where a checkout does not time a phase), the median walls
+of the wall time per phase ("–" where a checkout does not time a phase) and with a linear
+solver under way on either thread, the median walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
 current/REV of the median wall times and that of each pair (less sensitive to the machine's
@@ -72,6 +74,8 @@ SCRIPT = Path(__file__).resolve()
 REFERENCE = json.loads((ROOT / "geometries/reference/two_slits.json").read_text())
 MISSING = "–"
 """Shown for a figure a checkout cannot give."""
+SOLVER_KEY = "linear_solver"
+"""``ngat.timing.SOLVER_KEY``, spelt out: an older checkout's ngat has no such name."""
 
 
 def growth_onset(records: list[dict], slit_tips=((2.0, 2.0), (4.0, 4.0)), distance=0.1):
@@ -153,8 +157,12 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
         "pictures_s": pictures,
         "start_s": round(start, 2),
         "command_s": optional(lambda: round(start + wall + pictures, 2)),
-        "phases_s": {phase: seconds for phase, seconds in timing.items() if phase != "wall"},
+        "phases_s": {
+            phase: seconds for phase, seconds in timing.items() if phase not in ("wall", SOLVER_KEY)
+        },
         "solve_fraction": optional(lambda: round(timing["solve"] / timing["wall"], 3)),
+        "solver_s": timing.get(SOLVER_KEY),
+        "solver_fraction": optional(lambda: round(timing[SOLVER_KEY] / timing["wall"], 3)),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "am_iterations": optional(lambda: sum(r["am_iterations"] for r in records)),
         "am_iterations_growth": optional(
@@ -292,6 +300,9 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
             else None
             for p in phases
         },
+        "solver_share": optional(
+            lambda: round(statistics.median(b["solver_s"] / b["wall_s"] for b in benches), 3)
+        ),
         "stage_median_s": {
             stage: round(statistics.median(b["stages_s"][stage] for b in benches), 2)
             if all((b.get("stages_s") or {}).get(stage) is not None for b in benches)
@@ -362,6 +373,10 @@ def table(comparison: dict) -> str:
         line(f"{stage}, median [s]", lambda r, s=stage: cell(r["stage_median_s"][s], 1))
     for phase in comparison["phases"]:
         line(f"share {phase} [%]", lambda r, p=phase: cell(percent(r["phase_share"][p]), 1))
+    line(
+        "share with a linear solver under way, either thread [%]",
+        lambda r: cell(percent(r.get("solver_share")), 1),
+    )
     line("linear solves", lambda r: cell(r["linear_solves"]))
     line("final elements", lambda r: cell(r["final_elements"]))
     line("fracture time", lambda r: cell(r["fracture_time"]))

@@ -106,6 +106,8 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     cores = len(os.sched_getaffinity(0))
     assert 0.2 * run["wall_s"] < run["processor_s"] < (cores + 0.05) * run["wall_s"]
     assert current["processor_median_s"] == run["processor_s"]
+    # A linear solver runs through the solve phase, and in the background beyond it.
+    assert current["phase_share"]["solve"] - 0.005 <= current["solver_share"] <= 1.0
     # No break step before t = 1.35: every step's wall is before it.
     stages = current["stage_median_s"]
     assert stages["before the break"] > 0
@@ -118,6 +120,7 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert "| the command: start-up, run, pictures, median [s] |" in markdown
     assert "| processor time of the load history, all threads, median [s] |" in markdown
     assert "| break step, median [s] | – | – |" in markdown
+    assert "| share with a linear solver under way, either thread [%] |" in markdown
     ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
     assert comparison["pair_ratios"] == [round(ratio, 3)]
     assert f"Pair by pair: {ratio:.3f}" in markdown
