@@ -12,7 +12,7 @@ import threading
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 __all__ = ["BusyClock", "PhaseTimer", "linear_solver", "SOLVER_KEY"]
 
@@ -71,7 +71,7 @@ class BusyClock:
 
 linear_solver = BusyClock()
 """The process's clock of linear-solver work: the ``solve`` phase of every :class:`PhaseTimer`
-and every PARDISO phase (:meth:`ngat.pardiso.Pardiso`), in whichever thread it runs."""
+and every PARDISO phase (:class:`ngat.pardiso.Pardiso`), in whichever thread it runs."""
 
 
 class PhaseTimer:
@@ -108,10 +108,7 @@ class PhaseTimer:
         """Time the enclosed block and add it to ``phase``."""
         begin = time.perf_counter()
         try:
-            if phase == "solve":
-                with linear_solver():
-                    yield
-            else:
+            with linear_solver() if phase == "solve" else nullcontext():
                 yield
         finally:
             self.totals[phase] += time.perf_counter() - begin
