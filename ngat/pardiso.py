@@ -206,21 +206,19 @@ class Pardiso:
             )
 
     def _call(self, phase: int, slot: int = 1) -> None:
-        """Run PARDISO's ``phase`` on ``slot``, timed on :data:`ngat.timing.linear_solver`."""
+        """Run PARDISO's ``phase`` on ``slot``."""
         values = self._values[slot - 1]
         arrays = (values, self._indptr, self._indices, self.ordering, self._rhs, self._out)
         factors = (len(self._values), slot)
         if not self._sequential:
             wait_background()  # MKL's threads need both cores
-            with linear_solver():
-                _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
+            _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
             return
         # 0: the global count, MKL's threads (ngat.threads.FixedThreads), for METIS alone.
         metis = phase == 11 and self._threaded_ordering
         threads = _MKL.MKL_Set_Num_Threads_Local(0 if metis else 1)
         try:
-            with linear_solver():
-                _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
+            _pardiso(self._handle, self._mtype, phase, self.iparm, arrays, factors)
         finally:
             _MKL.MKL_Set_Num_Threads_Local(threads)
 
@@ -321,21 +319,23 @@ def _pardiso(
 
     ``arrays`` are the values, row pointers, columns, ordering, right-hand side and solution;
     none for the release (phase −1). ``factors``: PARDISO's ``maxfct`` (the factorisations
-    kept on the analysis) and ``mnum`` (the one this call is about).
+    kept on the analysis) and ``mnum`` (the one this call is about). Timed on
+    :data:`ngat.timing.linear_solver`, in whichever thread it runs.
     """
     values, indptr, indices, ordering, rhs, out = arrays or (None,) * 6
     error = _int(0)
-    _MKL.pardiso(
-        handle.ctypes.data, ctypes.byref(_int(factors[0])), ctypes.byref(_int(factors[1])),
-        ctypes.byref(_int(mtype)), ctypes.byref(_int(phase)),
-        ctypes.byref(_int(0 if rhs is None else len(rhs))),
-        None if values is None else values.ctypes.data,
-        None if indptr is None else _ptr(indptr), None if indices is None else _ptr(indices),
-        None if ordering is None else _ptr(ordering), ctypes.byref(_int(1)), _ptr(iparm),
-        ctypes.byref(_int(0)),
-        None if rhs is None else rhs.ctypes.data, None if out is None else out.ctypes.data,
-        ctypes.byref(error),
-    )  # fmt: skip
+    with linear_solver():
+        _MKL.pardiso(
+            handle.ctypes.data, ctypes.byref(_int(factors[0])), ctypes.byref(_int(factors[1])),
+            ctypes.byref(_int(mtype)), ctypes.byref(_int(phase)),
+            ctypes.byref(_int(0 if rhs is None else len(rhs))),
+            None if values is None else values.ctypes.data,
+            None if indptr is None else _ptr(indptr), None if indices is None else _ptr(indices),
+            None if ordering is None else _ptr(ordering), ctypes.byref(_int(1)), _ptr(iparm),
+            ctypes.byref(_int(0)),
+            None if rhs is None else rhs.ctypes.data, None if out is None else out.ctypes.data,
+            ctypes.byref(error),
+        )  # fmt: skip
     if error.value:
         reason = _ERRORS.get(error.value, "see MKL's PARDISO documentation")
         raise PardisoError(f"PARDISO phase {phase} failed with error {error.value}: {reason}")
