@@ -379,22 +379,25 @@ class NewtonSolver:
         """Backtrack along P(w + s d) until I_j ≤ I(w) + c (s ∇I·d + s² dᵀHd / 2) and ≤ ceiling.
 
         Returns the accepted s (the state then holds the new iterate), or 0 if none decreased I_j.
+        The trials are evaluated in the state (:meth:`ngat.state.ATState.energies`): I_j at
+        (u, v) is the one the caller measured, and that of the accepted trial the one it asks
+        for next, both memoised there.
         """
         state = self.state
         n = len(u)
-        functional, arrays = state.functional, state.arrays
-        start = functional.energies(arrays, u, v)["total"]
+        start = state.energies()["total"]  # the state holds (u, v)
         scale = 1.0
         for _ in range(self.max_halvings + 1):
-            u_trial = u + scale * direction[:n]
+            state.u_values[:] = u + scale * direction[:n]
             v_trial = np.clip(v + scale * direction[n:], 0.0, upper)
             v_trial[crack] = 0.0
-            energy = functional.energies(arrays, u_trial, v_trial)["total"]
+            state.v_values[:] = v_trial
+            energy = state.energies()["total"]
             model = scale * slope + 0.5 * scale**2 * curvature
             if energy <= min(start + self.armijo * model, ceiling):
-                state.u_values[:] = u_trial
-                state.v_values[:] = v_trial
                 return scale
             scale /= 2
+        state.u_values[:] = u
+        state.v_values[:] = v
         log.debug("Newton line search found no decrease of I_j")
         return 0.0

@@ -175,6 +175,21 @@ def test_negative_curvature_direction_has_the_curvature_it_reports():
         assert newton.factor.negative_eigenvalues == np.sum(eigenvalues < 0) > 0
 
 
+def test_newton_step_moves_the_state_downhill_or_leaves_it_as_it_was():
+    # The line search tries its steps in the state itself: a rejected step must restore
+    # (u, v) to the bit, an accepted one leave I_j of the new iterate, decreased, memoised.
+    state = indefinite_state()
+    u, v = state.u_values.copy(), state.v_values.copy()
+    start = state.energies()["total"]
+    newton = NewtonSolver(state)
+    assert newton.step(state.crack_set(), ceiling=-np.inf) == ""
+    assert np.array_equal(state.u_values, u) and np.array_equal(state.v_values, v)
+    assert newton.step(state.crack_set())
+    assert not np.array_equal(state.v_values, v)
+    energy = state.functional.energies(state.arrays, state.u_values, state.v_values)["total"]
+    assert state.energies()["total"] == energy < start
+
+
 @pytest.mark.parametrize("ritz_tol", [1.0, 0.01])
 def test_negative_curvature_search_returns_a_settled_ritz_pair(ritz_tol):
     # The escape's direction d = H⁻¹x must come from a Ritz pair (θ, x) of H⁻¹ whose
