@@ -389,9 +389,8 @@ class NewtonSolver:
         scale = 1.0
         for _ in range(self.max_halvings + 1):
             state.u_values[:] = u + scale * direction[:n]
-            v_trial = np.clip(v + scale * direction[n:], 0.0, upper)
-            v_trial[crack] = 0.0
-            state.v_values[:] = v_trial
+            state.v_values[:] = np.clip(v + scale * direction[n:], 0.0, upper)
+            state.v_values[crack] = 0.0
             energy = state.energies()["total"]
             model = scale * slope + 0.5 * scale**2 * curvature
             if energy <= min(start + self.armijo * model, ceiling):
