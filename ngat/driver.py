@@ -148,13 +148,12 @@ def prepare_next_step(
     times: np.ndarray,
     k: int,
 ) -> None:
-    """Start factorising and solving step ``k``'s first u-step once step k − 1 has converged.
+    """Start factorising the first a_j of load step ``k`` as soon as step k − 1 has converged.
 
     Step k's alternating minimisation starts from v(t_{k−1}), or from its prediction
-    (:func:`ngat.minimization.predicted_v`), with v = 0 on CR(t_k), and from u(t_{k−1}) with
-    g(t_k) on Ω_D: known once step k − 1 is, so its a_j factorises and its u-step solves in the
-    background (:meth:`ngat.halfsteps.HalfStepSolvers.prepare_u`) while step k − 1's
-    estimators, measures, fields and checkpoint are computed and written.
+    (:func:`ngat.minimization.predicted_v`), with v = 0 on CR(t_k): known once v(t_{k−1}) is, so
+    its a_j factorises in the background (:meth:`ngat.halfsteps.HalfStepSolvers.prepare_u`)
+    while step k − 1's estimators, measures, fields and checkpoint are computed and written.
     A refinement at the start of step k makes it a waste of the idle core, never a wrong
     number. Call before ``state.v_prev`` becomes v(t_{k−1}).
     """
@@ -166,7 +165,7 @@ def prepare_next_step(
         predicted = predicted_v(v, change, step_ratio(times, k), v if pointwise else 1.0)
     start = v.copy() if predicted is None else predicted
     start[state.crack_set(previous=v)] = 0.0
-    half_steps.prepare_u(start, state.loaded_values(float(times[k])))
+    half_steps.prepare_u(start)
 
 
 def run(

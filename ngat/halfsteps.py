@@ -19,21 +19,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
 from ngsolve import H1, BilinearForm
-from ngsolve.la import BaseVector
 
-from ngat.forms import MeshArrays, a_form, b_form
+from ngat.forms import a_form, b_form
 from ngat.linear import AMGConjugateGradient, HeldCholesky, LaggedCholesky
 from ngat.operators import LumpedOperators
 from ngat.parameters import SolverParameters
 from ngat.state import ATState
 
-__all__ = ["HalfStepSolvers", "LinearStatistics", "Prepared"]
+__all__ = ["HalfStepSolvers", "LinearStatistics"]
 
 log = logging.getLogger(__name__)
 
@@ -45,34 +43,6 @@ SPLIT_STEP_TOL = 1e-10
 """Newton step, relative to max |u|, below which the u-step of a split whose energy is not
 piecewise quadratic (``spectral``) has converged: Newton converges quadratically there, and
 the step of round-off (1e−16 times the condition of a_j) stays well below it."""
-
-
-@dataclass
-class Prepared:
-    """A half-step assembled, factorised and solved ahead (:meth:`HalfStepSolvers.prepare_u`).
-
-    Attributes
-    ----------
-    arrays
-        The mesh it was made on.
-    inputs
-        The fields its matrix was made from (v for a_j; u and CR for b_j).
-    start
-        The field its solve started from (u for the u-step, v for the v-step).
-    solution
-        The future of that solve's correction (``None``: no solve started).
-    """
-
-    arrays: MeshArrays
-    inputs: tuple[np.ndarray, ...]
-    start: np.ndarray
-    solution: Future | None
-
-    def correction(self, start: np.ndarray) -> np.ndarray | None:
-        """Return the solve's correction if it started from ``start`` (else ``None``)."""
-        if self.solution is None or not np.array_equal(self.start, start):
-            return None
-        return self.solution.result()
 
 
 @dataclass
@@ -169,10 +139,8 @@ class HalfStepSolvers:
         self._correction = operators.a_matrix.CreateColVector()
         self._v_residual = operators.b_matrix.CreateColVector()
         self._v_step = operators.b_matrix.CreateColVector()
-        self._u_start = operators.a_matrix.CreateColVector()  # the fields prepared solves
-        self._v_start = operators.b_matrix.CreateColVector()  # start from
         self._bound_active = 0
-        self._prepared: dict[str, Prepared] = {}  # by prepare_u and prepare_v
+        self._prepared: dict[str, tuple] = {}  # by prepare_u and prepare_v: mesh, inputs
 
     # -- u-step -----------------------------------------------------------------------------
     def solve_u(self, max_iterations: int = 50) -> None:
@@ -197,14 +165,9 @@ class HalfStepSolvers:
             with state.timer("solve"):
                 if not prepared:
                     self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet)
-                correction = prepared.correction(u) if prepared else None
-                prepared = None
-                if correction is None:
-                    self._set_u_residual(state.u.vec)
-                    self._solve(self._a_solver)
-                else:
-                    self._correction.FV().NumPy()[:] = correction
-                    self.statistics.solves += 1
+                prepared = False
+                self._residual.data = -1 * (operators.a_matrix * state.u.vec)
+                self._solve(self._a_solver)
             if tension is None:
                 state.u.vec.data += self._correction
                 return
@@ -213,16 +176,14 @@ class HalfStepSolvers:
                 return
         log.warning("split u-step: not converged after %d Newton iterations", max_iterations)
 
-    def prepare_u(self, v: np.ndarray | None = None, u: np.ndarray | None = None) -> None:
-        """Assemble the next u-step's a_j(v), start factorising it and solving; return at once.
+    def prepare_u(self, v: np.ndarray | None = None) -> None:
+        """Assemble the next u-step's a_j(v) and start factorising it; return at once.
 
-        As :meth:`prepare_v`: the factorisation and the solve run on while the caller computes
-        ν, the crack band and the energies of the v-step just solved, and :meth:`solve_u` on
-        the same mesh and v uses the factorisation, and the solution if it starts from the same
-        u. ``v``, ``u``: the fields the next u-step will start from if not the current ones
-        (the next load step's prediction and its u with the new Dirichlet data, prepared while
-        the driver writes this step's results). Without an energy split only (with one, a_j
-        depends on u's pattern).
+        As :meth:`prepare_v`: the factorisation runs on while the caller computes ν, the crack
+        band and the energies of the v-step just solved, and :meth:`solve_u` on the same mesh
+        and v uses it. ``v``: the v the next u-step will start from if not the current one (the
+        next load step's prediction, prepared while the driver writes this step's results).
+        Without an energy split only (with one, a_j depends on u's pattern).
         """
         state = self.state
         if (
@@ -231,28 +192,22 @@ class HalfStepSolvers:
         ):
             return
         v = state.v_values if v is None else v
-        u = state.u_values if u is None else u
         with state.timer("assembly"):
             self.operators.assemble_a(v)
         with state.timer("solve"):
             self._a_solver = self._refreshed(self._a_solver, "u", ~state.dirichlet, True)
             self._a_solver.refresh(background=True)
-            self._u_start.FV().NumPy()[:] = u
-            self._set_u_residual(self._u_start)
-            solution = self._a_solver.start_solve(self._residual.FV().NumPy())
-        self._prepared["u"] = Prepared(state.arrays, (v.copy(),), u.copy(), solution)
+        self._prepared["u"] = (state.arrays, v.copy())
 
-    def _claim(self, stage: str, *inputs: np.ndarray) -> Prepared | None:
-        """Return the ``stage``'s preparation if it was made on this mesh from these inputs.
+    def _claim(self, stage: str, *inputs: np.ndarray) -> bool:
+        """Return whether the ``stage``'s matrix was prepared on this mesh from these inputs.
 
         The preparation is forgotten either way: it serves one half-step at most.
         """
         prepared = self._prepared.pop(stage, None)
-        if prepared is None or prepared.arrays is not self.state.arrays:
-            return None
-        if all(np.array_equal(a, b) for a, b in zip(prepared.inputs, inputs, strict=True)):
-            return prepared
-        return None
+        if prepared is None or prepared[0] is not self.state.arrays:
+            return False
+        return all(np.array_equal(a, b) for a, b in zip(prepared[1:], inputs, strict=True))
 
     def _split_step(self, step: np.ndarray, tension: np.ndarray) -> bool:
         """Move u along a semismooth Newton step; return whether the u-step has converged."""
@@ -297,8 +252,7 @@ class HalfStepSolvers:
         """
         state = self.state
         direct = self.linear_solver == "direct"
-        prepared = self._claim("v", state.u_values, crack)
-        if not prepared:
+        if not self._claim("v", state.u_values, crack):
             self._assemble_v(crack)
             with state.timer("solve"):
                 factorised = np.ones_like(crack) if direct else ~crack
@@ -306,13 +260,7 @@ class HalfStepSolvers:
         state.v_values[crack] = 0.0
         with state.timer("solve"):
             free = ~crack
-            correction = prepared.correction(state.v_values) if prepared else None
-            if correction is None:
-                self._v_correction(self._b_solver, crack)
-            else:
-                self._v_step.FV().NumPy()[:] = correction
-                self.statistics.solves += 1
-                state.v.vec.data += self._v_step
+            self._v_correction(self._b_solver, crack)
             if state.model.irreversibility == "pointwise":
                 upper = state.v_prev.vec.FV().NumPy().copy()
                 self._bound_active = self._enforce_bounds(free, upper)
@@ -320,28 +268,20 @@ class HalfStepSolvers:
                 self._bound_active = self._enforce_bounds(free, 1.0)
 
     def prepare_v(self, crack: np.ndarray) -> None:
-        """Assemble the next v-step's b_j(u), start factorising it and solving; return at once.
+        """Assemble the next v-step's b_j(u) and start factorising it; return at once.
 
-        The factorisation and the v-step's solve from the current v run in the background
-        (:meth:`ngat.linear.LaggedCholesky.start_solve`) while the caller computes on — μ of
-        the u-step just solved (Algorithm 2, step 2.1) — and :meth:`solve_v` on the same mesh
-        from the same u, CR and v takes the solution; any other v-step assembles and solves
+        The factorisation runs in the background (:meth:`ngat.linear.LaggedCholesky.refresh`)
+        while the caller computes on — μ of the u-step just solved (Algorithm 2, step 2.1) —
+        and :meth:`solve_v` on the same mesh, u and CR uses it; any other v-step assembles
         anew. The direct solver only; the numbers are those of :meth:`solve_v` alone.
         """
         if self.linear_solver != "direct":
             return
-        state = self.state
         self._assemble_v(crack)
-        with state.timer("solve"):
+        with self.state.timer("solve"):
             self._b_solver = self._refreshed(self._b_solver, "v", np.ones_like(crack), True)
             self._b_solver.refresh(background=True)
-            start = self._v_start.FV().NumPy()
-            start[:] = state.v_values
-            start[crack] = 0.0  # as solve_v sets it
-            self._set_v_residual(self._v_start, crack)
-            solution = self._b_solver.start_solve(self._v_residual.FV().NumPy())
-        inputs = (state.u_values.copy(), crack.copy())
-        self._prepared["v"] = Prepared(state.arrays, inputs, start.copy(), solution)
+        self._prepared["v"] = (self.state.arrays, self.state.u_values.copy(), crack.copy())
 
     def _assemble_v(self, crack: np.ndarray) -> None:
         """Write b_j(u)'s values; the direct solver's with CR decoupled (identity-like rows).
@@ -363,21 +303,13 @@ class HalfStepSolvers:
         ``fixed``: DOFs the solver factorised though v stays there (CR, decoupled in B); the
         right-hand side is 0 on them, and so is δ.
         """
-        self._set_v_residual(self.state.v.vec, fixed)
-        self._solve(solver, "v")
-        self.state.v.vec.data += self._v_step
-
-    def _set_u_residual(self, u: BaseVector) -> None:
-        """Write −A u into the u-step's residual."""
-        self._residual.data = -1 * (self._operators.a_matrix * u)
-
-    def _set_v_residual(self, v: BaseVector, fixed: np.ndarray | None = None) -> None:
-        """Write f m − B v into the v-step's residual, 0 on the ``fixed`` DOFs."""
-        residual = self._v_residual
-        residual.FV().NumPy()[:] = self.state.model.surface.source * self.state.arrays.mass
-        residual.data -= self._operators.b_matrix * v
+        state = self.state
+        self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
+        self._v_residual.data -= self._operators.b_matrix * state.v.vec
         if fixed is not None:
-            residual.FV().NumPy()[fixed] = 0.0
+            self._v_residual.FV().NumPy()[fixed] = 0.0
+        self._solve(solver, "v")
+        state.v.vec.data += self._v_step
 
     def _enforce_bounds(self, free: np.ndarray, upper, max_sweeps: int = 50) -> int:
         """Primal-dual active set for 0 ≤ v ≤ upper on the free DOFs; return the active count.
@@ -409,7 +341,8 @@ class HalfStepSolvers:
                     **self._shared_analysis("held"),
                 )  # fmt: skip
                 self._v_correction(held)
-            self._set_v_residual(state.v.vec)
+            self._v_residual.FV().NumPy()[:] = state.model.surface.source * state.arrays.mass
+            self._v_residual.data -= operators.b_matrix * state.v.vec
             gradient = -self._v_residual.FV().NumPy()  # ∂I_j/∂v_i up to the factor 2
             new_low = free & ((low & (gradient > 0)) | (~high & (v < -round_off)))
             new_high = free & ((high & (gradient < 0)) | (~low & (v > upper + round_off)))

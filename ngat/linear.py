@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from concurrent.futures import Future
 
 import numpy as np
 from ngsolve import BilinearForm, BitArray, IntRange, Preconditioner
@@ -118,17 +117,6 @@ class LaggedCholesky:
                 return
         self.refresh()
         out.data = self.inverse * rhs
-
-    def start_solve(self, rhs: np.ndarray) -> Future | None:
-        """Start :meth:`solve` of the values ``rhs`` in the background after a :meth:`refresh`.
-
-        Returns the future of the solution (:meth:`ngat.pardiso.PardisoInverse.start_solve`,
-        the bits of :meth:`solve`), or ``None`` where the factorisation is stale or not
-        PARDISO's: then call :meth:`solve`.
-        """
-        if self.stale or not isinstance(self.inverse, PardisoInverse):
-            return None
-        return self.inverse.start_solve(rhs)
 
     def refresh(self, background: bool = False) -> None:
         """Refactorise with the current values if they changed since the last factorisation.

@@ -250,24 +250,6 @@ class Pardiso:
     def solve(self, rhs: np.ndarray, slot: int = 1) -> np.ndarray:
         """Return A⁻¹ ``rhs`` with the last factorisation in ``slot``."""
         _wait(self._pending)
-        return self._solve(rhs, slot)
-
-    def start_solve(self, rhs: np.ndarray, slot: int = 1) -> Future:
-        """Start :meth:`solve` after the phases under way and return its future; return at once.
-
-        As :meth:`factorise` with ``background``: in the worker thread where the factorisation
-        is sequential (here otherwise), and every later call that uses the factorisation waits
-        for it. The same bits as :meth:`solve`; ``rhs`` is copied.
-        """
-        if not self._sequential:
-            future: Future = Future()
-            future.set_result(self.solve(rhs, slot))
-            return future
-        future = in_background(self._solve, np.array(rhs, dtype=float), slot)
-        self._pending.append(future)
-        return future
-
-    def _solve(self, rhs: np.ndarray, slot: int) -> np.ndarray:
         self._rhs[:] = rhs
         if self.n:
             self._call(33, slot)
@@ -458,20 +440,6 @@ class PardisoInverse(BaseMatrix):
             out[:] = np.nan
         out[~self.free] = 0.0
 
-    def start_solve(self, x: np.ndarray) -> Future:
-        """Start :meth:`Mult` of the values ``x`` in the background; return the future of y.
-
-        The solve runs after the factorisation under way (:meth:`Pardiso.start_solve`); y is
-        :meth:`Mult`'s to the bit.
-        """
-        if not self.finite:
-            future: Future = Future()
-            future.set_result(np.where(self.free, np.nan, 0.0))
-            return future
-        started = self.factor.start_solve(np.where(self.free, x, 0.0), self.slot)
-        free = self.free.copy()
-        return in_background(_zero_fixed, started, free)
-
     def Height(self) -> int:
         """Return the matrix's height."""
         return self.matrix.height
@@ -492,13 +460,6 @@ class PardisoInverse(BaseMatrix):
     def negative_eigenvalues(self) -> int:
         """Negative eigenvalues of the last factorised matrix on the free DOFs."""
         return self.factor.negative_eigenvalues
-
-
-def _zero_fixed(solution: Future, free: np.ndarray) -> np.ndarray:
-    """Return the finished ``solution`` with 0 where ``free`` is false (as Mult writes it)."""
-    out = solution.result()
-    out[~free] = 0.0
-    return out
 
 
 def _upper_triangle(matrix: SparseMatrixd, number: np.ndarray) -> tuple[np.ndarray, ...]:

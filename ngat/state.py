@@ -356,19 +356,6 @@ class ATState:
                     "fix its load function"
                 )
 
-    def loaded_values(self, t: float) -> np.ndarray:
-        """Return the DOF values of u with g(t) on Ω_D, those :meth:`apply_load` would set.
-
-        The state's own u and load parameter stay as they are.
-        """
-        u, now = self.u_values.copy(), self.t.Get()
-        self.t.Set(t)
-        try:
-            self._interpolate(self.loads, u)
-        finally:
-            self.t.Set(now)
-        return u
-
     def _interpolate(self, functions: Mapping[str, ngsolve.CoefficientFunction], out: np.ndarray):
         """Write each region's function into ``out`` at that region's vertices (interpolation).
 
