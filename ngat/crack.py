@@ -65,10 +65,7 @@ def components(arrays: MeshArrays, mask: np.ndarray) -> np.ndarray:
 
 
 def _components(edges: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """:func:`components` on the given edges (all edges between vertices of the set among them).
-
-    The graph has the set's vertices only, so a small set costs little beyond the mask.
-    """
+    """:func:`components` on the given edges (all edges between vertices of the set among them)."""
     inside = np.flatnonzero(mask)
     labels = _labels(edges, mask, inside)
     out = np.full(len(mask), -1, dtype=labels.dtype)
@@ -77,7 +74,10 @@ def _components(edges: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def _labels(edges: np.ndarray, mask: np.ndarray, inside: np.ndarray) -> np.ndarray:
-    """Return the component labels of the set's vertices ``inside`` (its ``flatnonzero``)."""
+    """Return the component labels of the set's vertices ``inside`` (its ``flatnonzero``).
+
+    The graph has the set's vertices only, so a small set costs little beyond the mask.
+    """
     edges = edges[mask[edges[:, 0]] & mask[edges[:, 1]]]
     local = np.full(len(mask), -1, dtype=np.int64)
     local[inside] = np.arange(len(inside))
