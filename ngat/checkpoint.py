@@ -49,6 +49,7 @@ from ngat.parameters import computing, with_legacy_values
 from ngat.remesh import Patch, splice
 from ngat.results import parse_records
 from ngat.state import ATState
+from ngat.timing import WITHOUT_SOLVER_KEY
 
 __all__ = [
     "Checkpoint",
@@ -70,7 +71,14 @@ FIELDS = ("u", "v", "v_prev", "v_change")
 """The fields a checkpoint keeps: u, v, v(t_{k−1}) and v(t_{k−1}) − v(t_{k−2}) (the
 predictor's, :func:`ngat.minimization.predict_v`; older checkpoints have no ``v_change``)."""
 
-CARRIED = ("timing", "fracture_time", "refinement_history", "resumed_after_step", "diagnostics")
+CARRIED = (
+    "timing",
+    WITHOUT_SOLVER_KEY,
+    "fracture_time",
+    "refinement_history",
+    "resumed_after_step",
+    "diagnostics",
+)
 """The summary entries gathered during the steps that the checkpoint keeps for a resumed run.
 
 The refinement history has one entry per mesh refinement, as the refinement list of the mesh

@@ -56,7 +56,7 @@ from ngat.scene import Scene
 from ngat.state import ATState
 from ngat.strategies import nonlinear_strategy
 from ngat.threads import CoreUse, FixedThreads
-from ngat.timing import PhaseTimer
+from ngat.timing import WITHOUT_SOLVER_KEY, PhaseTimer
 
 __all__ = ["run"]
 
@@ -226,7 +226,8 @@ def _run_locked(
     checkpoint, records = (
         prepare_resume(folder, scene.name, parameters.flat(), times) if resume else (None, [])
     )
-    timer = PhaseTimer(checkpoint.summary.get("timing") if checkpoint else None)
+    earlier = checkpoint.summary if checkpoint else {}
+    timer = PhaseTimer(earlier.get("timing"), earlier.get(WITHOUT_SOLVER_KEY))
     output = parameters.output
     stored = [
         (r["t"], vtu_name(r["step"]))
@@ -352,6 +353,7 @@ def _run_locked(
                     k, len(times), time.perf_counter() - checkpointed
                 ):
                     summary["timing"] = timer.summary()
+                    summary[WITHOUT_SOLVER_KEY] = timer.without_solver()
                     summary["diagnostics"] = diagnostics.summary()
                     with timer("checkpoint"):
                         writer.sync()  # the rows before the checkpoint that counts them
@@ -387,6 +389,7 @@ def _run_locked(
             summary["final"] = {key: last[key] for key in ("step", "t", "bulk", "surface", "total")}
             summary["final"].update(elements=last["elements"], h_min=last["h_min"])
         summary["timing"] = timer.summary()
+        summary[WITHOUT_SOLVER_KEY] = timer.without_solver()
         summary["diagnostics"] = diagnostics.summary()
         threads.restore()
         try:

@@ -19,7 +19,8 @@ and SciPy and loading the scene, counted from the script's start) and the comman
 start-up + run + pictures: what ``ngat run two-slits`` takes, less the interpreter's own start
 of some 20 ms; the processor time of the load history, all threads, user and system; seconds
 per timed phase and with a linear solver under way on either thread (the factorisations that
-run in the background, behind the estimators, count there), peak memory, AM iterations in
+run in the background, behind the estimators, count there), each phase's seconds with no
+linear solver under way (the work no solve hides), peak memory, AM iterations in
 total and in the growth window, linear solves, fracture time, E(1.0), final elements, element
 sizes, the wall of the steps before the break step, of it and after it) and ``phases.png``;
 the run's results folder in ``run/``.
@@ -36,7 +37,8 @@ an older revision cannot give is reported as "–". Output in ``--out``: ``compa
 printed) and ``compare.json`` with, per checkout, the wall time (median, min, max) of the load
 history, with the pictures and of the whole command, the median processor time, the share
 of the wall time per phase ("–" where a checkout does not time a phase) and with a linear
-solver under way on either thread, the median walls
+solver under way on either thread, each phase's median seconds with none under way, the median
+walls
 before, of and after the break step, linear solves, final elements, fracture time, the error
 of E(1.0) against ``geometries/reference/two_slits.json``, peak memory, the ratio
 current/REV of the median wall times and that of each pair (less sensitive to the machine's
@@ -76,6 +78,8 @@ MISSING = "–"
 """Shown for a figure a checkout cannot give."""
 SOLVER_KEY = "linear_solver"
 """``ngat.timing.SOLVER_KEY``, spelt out: an older checkout's ngat has no such name."""
+WITHOUT_SOLVER_KEY = "timing_without_solver"
+"""``ngat.timing.WITHOUT_SOLVER_KEY``, spelt out for the same reason."""
 
 
 def growth_onset(records: list[dict], slit_tips=((2.0, 2.0), (4.0, 4.0)), distance=0.1):
@@ -163,6 +167,7 @@ def measure(quick: bool, until: float | None, folder: Path) -> dict:
         "solve_fraction": optional(lambda: round(timing["solve"] / timing["wall"], 3)),
         "solver_s": timing.get(SOLVER_KEY),
         "solver_fraction": optional(lambda: round(timing[SOLVER_KEY] / timing["wall"], 3)),
+        "without_solver_s": summary.get(WITHOUT_SOLVER_KEY),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "am_iterations": optional(lambda: sum(r["am_iterations"] for r in records)),
         "am_iterations_growth": optional(
@@ -202,7 +207,13 @@ def plot_phases(bench: dict, title: str, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(6.5, 3.5))
     split = bench["phases_s"]
-    ax.barh(list(split), list(split.values()), color="tab:blue")
+    ax.barh(list(split), list(split.values()), color="tab:blue", label="phase")
+    alone = bench.get("without_solver_s")
+    if alone is not None:
+        # The part of each phase that no solve hides, in front of the phase's bar.
+        seconds = [alone.get(phase, 0.0) for phase in split]
+        ax.barh(list(split), seconds, color="tab:red", label="no solver under way")
+        ax.legend(loc="lower right", fontsize="small")
     if bench.get("solver_s") is not None:
         # Overlaps the phases: the background factorisations run behind the others.
         label = f"solver, either thread\n({100 * bench['solver_fraction']:.0f} % of the wall)"
@@ -307,6 +318,12 @@ def summarise(benches: list[dict], phases: list[str]) -> dict:
         "solver_share": optional(
             lambda: round(statistics.median(b["solver_s"] / b["wall_s"] for b in benches), 3)
         ),
+        "without_solver_median_s": {
+            p: round(statistics.median(b["without_solver_s"][p] for b in benches), 2)
+            if all(p in (b.get("without_solver_s") or {}) for b in benches)
+            else None
+            for p in phases
+        },
         "stage_median_s": {
             stage: round(statistics.median(b["stages_s"][stage] for b in benches), 2)
             if all((b.get("stages_s") or {}).get(stage) is not None for b in benches)
@@ -381,6 +398,12 @@ def table(comparison: dict) -> str:
         "share with a linear solver under way, either thread [%]",
         lambda r: cell(percent(r.get("solver_share")), 1),
     )
+    for phase in comparison["phases"]:
+        if phase != "solve":
+            line(
+                f"{phase} with no solver under way, median [s]",
+                lambda r, p=phase: cell(r["without_solver_median_s"][p], 2),
+            )
     line("linear solves", lambda r: cell(r["linear_solves"]))
     line("final elements", lambda r: cell(r["final_elements"]))
     line("fracture time", lambda r: cell(r["fracture_time"]))

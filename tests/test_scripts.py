@@ -108,6 +108,12 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert current["processor_median_s"] == run["processor_s"]
     # A linear solver runs through the solve phase, and in the background beyond it.
     assert current["phase_share"]["solve"] - 0.005 <= current["solver_share"] <= 1.0
+    # The phases' seconds with no solver under way are the rest of the run's wall.
+    alone = run["without_solver_s"]
+    assert "solve" not in alone and min(alone.values()) >= -0.01
+    rest = sum(run["phases_s"].values()) - run["solver_s"]
+    assert sum(alone.values()) == pytest.approx(rest, abs=0.01)
+    assert current["without_solver_median_s"]["assembly"] == round(alone["assembly"], 2)
     # No break step before t = 1.35: every step's wall is before it.
     stages = current["stage_median_s"]
     assert stages["before the break"] > 0
@@ -121,6 +127,7 @@ def test_bench_paper_against_the_same_revision(tmp_path):
     assert "| processor time of the load history, all threads, median [s] |" in markdown
     assert "| break step, median [s] | – | – |" in markdown
     assert "| share with a linear solver under way, either thread [%] |" in markdown
+    assert "| assembly with no solver under way, median [s] |" in markdown
     ratio = comparison["runs"]["current"][0]["wall_s"] / comparison["runs"]["against"][0]["wall_s"]
     assert comparison["pair_ratios"] == [round(ratio, 3)]
     assert f"Pair by pair: {ratio:.3f}" in markdown

@@ -74,3 +74,45 @@ def test_a_resumed_timer_counts_on_from_the_earlier_part_and_keeps_no_phase_of_i
     summary = PhaseTimer(earlier).summary()
     assert summary[SOLVER_KEY] >= 3.0 and summary["wall"] >= 5.0
     assert set(summary) == {"solve", "other", "wall", SOLVER_KEY}
+
+
+def test_a_phase_inside_another_counts_for_itself_and_the_phases_add_up_to_the_wall():
+    now = Now()
+    timer = PhaseTimer(clock=BusyClock(now))
+    with timer("remesh"):
+        now.t = 1.0
+        with timer("refine"):
+            now.t = 3.0
+        now.t = 4.0
+    now.t = 6.0
+    summary = timer.summary()
+    assert summary["remesh"] == pytest.approx(2.0)  # [0, 1] and [3, 4], not the bisection's 2 s
+    assert summary["refine"] == pytest.approx(2.0)
+    assert summary["other"] == pytest.approx(2.0) and summary["wall"] == pytest.approx(6.0)
+
+
+def test_without_solver_leaves_out_every_second_a_solve_runs_on_either_thread():
+    now = Now()
+    clock = BusyClock(now)
+    timer = PhaseTimer(clock=clock)
+    with timer("assembly"):
+        now.t = 1.0
+    with timer("estimate"):
+        factorisation = clock()  # on the worker from 1 to 3, behind the estimator
+        factorisation.__enter__()
+        now.t = 3.0
+        factorisation.__exit__(None, None, None)
+        now.t = 4.0
+    with timer("solve"):
+        now.t = 5.0
+    now.t = 7.0  # outside every phase
+    summary, alone = timer.summary(), timer.without_solver()
+    assert summary[SOLVER_KEY] == pytest.approx(3.0)  # [1, 3] and [4, 5]
+    assert alone == pytest.approx({"assembly": 1.0, "estimate": 1.0, "other": 2.0})
+    assert sum(alone.values()) == pytest.approx(summary["wall"] - summary[SOLVER_KEY])
+
+
+def test_a_resumed_timer_counts_on_the_earlier_part_without_a_solver():
+    earlier = {"assembly": 2.0, "solve": 3.0, "other": 1.0, "wall": 6.0, SOLVER_KEY: 3.0}
+    timer = PhaseTimer(earlier, {"assembly": 2.0, "other": 1.0}, clock=BusyClock(Now()))
+    assert timer.without_solver() == pytest.approx({"assembly": 2.0, "other": 1.0})
