@@ -573,6 +573,11 @@ class MeshArrays:
         return self._incidence.T
 
     @cached_property
+    def bounding_diameter(self) -> float:
+        """Diameter of the vertices' bounding box, once per mesh."""
+        return float(np.linalg.norm(self.coords.max(axis=0) - self.coords.min(axis=0)))
+
+    @cached_property
     def centroid(self) -> np.ndarray:
         """Element centroids (ne, 2): :meth:`vertex_mean` of the coordinates, once per mesh."""
         return self.vertex_mean(self.coords)

@@ -278,8 +278,7 @@ def iteration_limit(state: ATState, solver: SolverParameters) -> int:
     """
     if solver.am_max_iter:
         return solver.am_max_iter
-    coords = state.arrays.coords
-    diameter = float(np.linalg.norm(coords.max(axis=0) - coords.min(axis=0)))
+    diameter = state.arrays.bounding_diameter
     return max(LEAST_ITERATIONS, int(np.ceil(ITERATIONS_PER_EPS * diameter / state.model.eps)))
 
 
