@@ -468,13 +468,21 @@ class CrackBand:
         rounds = 0
         with state.timer("band"):
             marked |= self.graded(coords, elements, everywhere, arrays.diameter)
-        while rounds < MAX_ROUNDS and bisect(state, marked):
+        while rounds < MAX_ROUNDS:
+            known = len(coords)  # the vertices before this round's bisection
+            if not bisect(state, marked):
+                break
             rounds += 1
             with state.timer("band"):
                 coords, elements = mesh_geometry(state.mesh)
-                diameter = element_diameters(coords, elements)
-                marked = self.marked(coords, elements, damaged_tree, tips, diameter)
-                marked |= self.graded(coords, elements, everywhere, diameter)
+                # Only an element the round made can be marked: bisection keeps the vertices'
+                # numbers and every element it makes holds one of the new vertices, and the
+                # elements it kept were not marked (the centres are the same in every round).
+                new = np.flatnonzero(elements.max(axis=1) >= known)
+                diameter = element_diameters(coords, elements[new])
+                marked = np.zeros(len(elements), dtype=bool)
+                marked[new] = self.marked(coords, elements[new], damaged_tree, tips, diameter)
+                marked[new] |= self.graded(coords, elements[new], everywhere, diameter)
         if rounds:
             rebuild(state)
             log.debug("crack band: %d rounds, %d elements", rounds, state.arrays.ne)
