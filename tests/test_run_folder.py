@@ -86,6 +86,10 @@ def test_resume_without_summary_counts_the_whole_wall_time(tmp_path, capsys):
     assert phases == pytest.approx(wall, abs=1e-3)
     solver = summary["timing"][SOLVER_KEY]  # the solve phase, or more: solves on either thread
     assert summary["timing"]["solve"] - 1e-3 <= solver <= wall
+    # Each phase's seconds with no solver under way are a part of it, and they are the rest.
+    alone = summary["timing_without_solver"]
+    assert all(0 <= seconds <= summary["timing"][phase] + 1e-3 for phase, seconds in alone.items())
+    assert sum(alone.values()) == pytest.approx(wall - solver, abs=1e-3)
 
 
 def test_resumed_run_keeps_the_diagnostics_of_the_interrupted_part(tiny_run, tmp_path):
