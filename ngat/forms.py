@@ -512,6 +512,11 @@ class MeshArrays:
         )
 
     @cached_property
+    def stiffness_diagonal(self) -> np.ndarray:
+        """The diagonals ∫_T |∇φ_a|² of the element stiffness matrices, (ne, 3), contiguous."""
+        return np.ascontiguousarray(np.diagonal(self.stiffness, axis1=1, axis2=2))
+
+    @cached_property
     def h2(self) -> np.ndarray:
         """Squared element diameters h_T²."""
         return self.diameter * self.diameter

@@ -118,17 +118,29 @@ class LumpedFunctional:
         )  # fmt: skip
         return np.concatenate([g_u, g_v])
 
-    def hessian_blocks(
+    def hessian_constant(self, arrays: MeshArrays) -> np.ndarray:
+        """Return the element blocks of ∂²I/∂v² that v and u leave alone: 2 G_c d K_T, (ne, 3, 3).
+
+        They are the whole block off the diagonal; on it :meth:`hessian_terms` adds the mass
+        term. d is the crack density's diffusion coefficient (AT2: the paper's ε).
+        """
+        surface = self.model.surface
+        return 2 * self.model.gc * surface.diffusion * arrays.stiffness
+
+    def hessian_terms(
         self,
         arrays: MeshArrays,
         u: np.ndarray,
         v: np.ndarray,
-        parts: list[np.ndarray],
-        out: tuple[np.ndarray, np.ndarray, np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Write the element blocks of ∇²I_j at (u, v) into ``out`` and return them.
+        out: tuple[np.ndarray, np.ndarray],
+    ) -> list[np.ndarray]:
+        """Write the element terms of ∇²I_j at (u, v) that change with them into ``out``.
 
-        The blocks are uu, vv and vu (row v_a, column u_b).
+        ∂²I/∂u² = Σ_k Σ_T 2 w_k,T K_k,T over the parts K_k of a_j
+        (:meth:`ngat.elasticity.Elasticity.parts`): the weights 2 w_k are returned, one (ne,)
+        array per part. ∂²I/∂v² = 2 G_c B(u): :meth:`hessian_constant` off the diagonal and, on
+        it, 2 G_c d K_T,aa + 2 |T| (W⁺(u) + G_c q)/3, written into ``out[0]``. The coupling
+        ∂²I/∂v_a∂u_b = (4/3) |T| v_a (s·∇φ_b) is written into ``out[1]``.
 
         Parameters
         ----------
@@ -136,30 +148,30 @@ class LumpedFunctional:
             Element geometry of the mesh.
         u, v
             DOF values of the two P1 fields.
-        parts
-            The element matrices of a_j's parts (:meth:`ngat.elasticity.Elasticity.parts`).
         out
-            Arrays of shapes (ne, 3c, 3c), (ne, 3, 3) and (ne, 3, 3c) for the c components of
-            u: views of the one buffer per mesh of :class:`ngat.newton.NewtonSolver`, which
-            scatters it as it is.
+            Arrays of shapes (ne, 3) and (ne, 3, 3c) for the c components of u: views of
+            the one buffer per mesh of :class:`ngat.newton.NewtonSolver`, which scatters it as
+            it is.
+
+        Returns
+        -------
+        list of np.ndarray
+            2 w_k per part of a_j.
         """
         model, density = self.model, self.density
-        el, area, stiffness = arrays.elements, arrays.area, arrays.stiffness
-        uu, vv, vu = out
+        el, area = arrays.elements, arrays.area
+        diagonal, vu = out
         flux = density.fluxes(density.gradient(arrays, u))[0]
         weights = self.u_step_weights(arrays, u, arrays.square_mean(v) + model.eta)
-        np.multiply(2 * weights[0][:, None, None], parts[0], out=uu)
-        for w, part in zip(weights[1:], parts[1:], strict=True):
-            uu += 2 * w[:, None, None] * part
         surface = model.surface
         mass_term = area * (density.degraded_density(arrays, u) + model.gc * surface.reaction) / 3
-        np.multiply(2 * model.gc * surface.diffusion, stiffness, out=vv)
-        vv.reshape(arrays.ne, 9)[:, ::4] += 2 * mass_term[:, None]  # the diagonals, in place
+        np.multiply(2 * model.gc * surface.diffusion, arrays.stiffness_diagonal, out=diagonal)
+        diagonal += 2 * mass_term[:, None]
         u_flux = np.einsum("eik,ebk->eib", flux, arrays.grad_phi).reshape(arrays.ne, -1)
         # The outer product of 4|T|/3 v_a and s∇φ_b, by einsum: twice as fast as broadcasting's
         # inner loops of three, and each entry the same single product.
         np.einsum("ea,eb->eab", ((4 / 3) * area)[:, None] * v[el], u_flux, out=vu)
-        return uu, vv, vu
+        return [2 * w for w in weights]
 
     def energy_form(self, space: ngsolve.FESpace) -> BilinearForm:
         """Return I_j(u, v) as an NGSolve energy on ``space``, the product of u's space and P1.

@@ -28,6 +28,7 @@ import logging
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
+from scipy.sparse import csc_matrix
 
 from ngat.halfsteps import HalfStepSolvers
 from ngat.parameters import ParameterError
@@ -151,7 +152,6 @@ class NewtonSolver:
         c = state.elasticity.components
         operators = self.half_steps.operators
         graph = operators.b_assembler
-        self.stiffness_parts = operators.stiffness_parts
         _, cols_g, rowptr_g = operators.b_matrix.CSR()
         cols_g, rowptr_g = np.asarray(cols_g, dtype=np.int64), np.asarray(rowptr_g, np.int64)
         n, degree = len(rowptr_g) - 1, np.diff(rowptr_g)
@@ -174,17 +174,20 @@ class NewtonSolver:
         self.entry_rows = np.repeat(np.arange((c + 1) * n), lengths.ravel())
         self.diagonal = start.ravel()  # U_a begins with a
         el, ne = arrays.elements, arrays.ne
-        # [e, i, j]: where local vertex i sits in the row of G of local vertex j.
-        mirrored = graph.position.reshape(ne, 3, 3).transpose(0, 2, 1)
+        # [e, i, j]: where local vertex i sits in the row of G of local vertex j (mirrored), and
+        # vertex j (columns). Contiguous, so that the sums below run in one loop: broadcasting's
+        # inner loops of three took three times as long.
+        mirrored = np.ascontiguousarray(graph.position.reshape(ne, 3, 3).transpose(0, 2, 1))
+        columns = np.broadcast_to(el[:, None, :], (ne, 3, 3)).ravel()
         above = el[:, None, :] > el[:, :, None]  # (ne, 3, 3): b > a, above the diagonal of G
-        # In hessian_blocks' order: uu (ne, I, i, J, j), vv (ne, i, j) and vu (ne, i, J, j).
-        sizes = np.cumsum([0, ne * 9 * c * c, ne * 9, ne * 9 * c])
-        self.position = np.empty(sizes[-1], dtype=np.int64)
-        uu = self.position[sizes[0] : sizes[1]].reshape(ne, c, 3, c, 3)
-        vu = self.position[sizes[2] : sizes[3]].reshape(ne, 3, c, 3)
+        # The positions of the element blocks uu (ne, I, i, J, j), vv (ne, i, j) and
+        # vu (ne, i, J, j); self.nnz where an entry is discarded.
+        uu = np.empty((ne, c, 3, c, 3), dtype=np.int64)
+        vv = np.empty((ne, 3, 3), dtype=np.int64)
+        vu = np.empty((ne, 3, c, 3), dtype=np.int64)
         local_blocks = {(i, j): uu[:, i, :, j] for i in range(c) for j in range(c)}
         local_blocks |= {(c, j): vu[:, :, j] for j in range(c)}
-        local_blocks[c, c] = self.position[sizes[1] : sizes[2]].reshape(ne, 3, 3)
+        local_blocks[c, c] = vv
         for (i, j), out in local_blocks.items():  # block row i, block column j: row (j, b)
             if j > i:
                 out[...] = self.nnz
@@ -193,25 +196,60 @@ class NewtonSolver:
                 row = start[j] - graph.diagonal
             else:
                 row = start[j] + upper_g + (i - j - 1) * degree - rowptr_g[:-1]
-            np.add(row[el][:, None, :], mirrored, out=out)
+            np.add(row.take(columns).reshape(ne, 3, 3), mirrored, out=out)
             if i == j:
                 np.copyto(out, self.nnz, where=above)
+        self._curvature = self._fixed_terms(uu.reshape(ne, -1), vv, operators.stiffness_parts)
+        # The terms that change with (u, v): vv's diagonal and vu, scattered by one bincount.
+        self.position = np.concatenate([np.diagonal(vv, axis1=1, axis2=2).ravel(), vu.ravel()])
         self._local = np.empty(len(self.position))
-        self._blocks = (
-            self._local[sizes[0] : sizes[1]].reshape(ne, 3 * c, 3 * c),
-            self._local[sizes[1] : sizes[2]].reshape(ne, 3, 3),
-            self._local[sizes[2] : sizes[3]].reshape(ne, 3, 3 * c),
+        self._terms = (
+            self._local[: 3 * ne].reshape(ne, 3),
+            self._local[3 * ne :].reshape(ne, 3, -1),
         )
         self.factor = None
         self.certified = 0.0
         self._arrays = arrays
 
+    def _fixed_terms(self, uu: np.ndarray, vv: np.ndarray, parts: list[np.ndarray]) -> csc_matrix:
+        """Return the matrix that maps the weights of ∂²I/∂u²'s parts to the Hessian's values.
+
+        Column (T, k) holds the entries of the element matrix K_k,T of a_j's part k at their
+        positions ``uu`` (ne, 9c²) in the graph, the discarded ones in a last row (``nnz``) that
+        the product drops; a last column holds the sums of ∂²I/∂v²'s entries off the diagonal,
+        which do not change (:meth:`ngat.functional.LumpedFunctional.hessian_constant`). Its
+        product with the weights 2 w_k,T (:meth:`ngat.functional.LumpedFunctional.hessian_terms`)
+        and 1 sums element by element, as the bincount of the scattered products would: to the
+        last bit with one part (the same single products, in the same order).
+        """
+        ne, nnz, state = len(uu), self.nnz, self.state
+        constant = state.functional.hessian_constant(state.arrays)
+        constant[:, [0, 1, 2], [0, 1, 2]] = 0.0  # the diagonal is hessian_terms'
+        fixed = np.bincount(vv.ravel(), weights=constant.ravel(), minlength=nnz + 1)
+        # Off the diagonal, the last block row (v) holds only vv's entries: U_a less a.
+        v_rows = self.diagonal[-state.arrays.nv :]
+        where = np.ones(nnz - v_rows[0], dtype=bool)
+        where[v_rows - v_rows[0]] = False
+        where = v_rows[0] + np.flatnonzero(where)
+        size = ne * len(parts) * uu.shape[1]
+        entries = np.empty(size + len(where))
+        rows = np.empty(len(entries), dtype=np.int64)
+        for k, part in enumerate(parts):
+            entries[:size].reshape(ne, len(parts), -1)[:, k] = part.reshape(ne, -1)
+        rows[:size].reshape(ne, len(parts), -1)[...] = uu[:, None, :]
+        entries[size:], rows[size:] = fixed[where], where
+        columns = np.append(np.arange(0, size + 1, uu.shape[1]), len(entries))
+        return csc_matrix((entries, rows, columns), shape=(nnz + 1, len(columns) - 1))
+
     def hessian_values(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the values of ∇²I_j at (u, v) on and above the diagonal, in the graph's order."""
         state = self.state
         # Into one buffer per mesh: a new array of this size costs its page faults every time.
-        state.functional.hessian_blocks(state.arrays, u, v, self.stiffness_parts, self._blocks)
-        return np.bincount(self.position, weights=self._local, minlength=self.nnz + 1)[: self.nnz]
+        weights = state.functional.hessian_terms(state.arrays, u, v, self._terms)
+        values = self._curvature @ np.append(np.stack(weights, axis=1).ravel(), 1.0)
+        values = values[: self.nnz]  # the last row holds the discarded entries
+        values += np.bincount(self.position, weights=self._local, minlength=self.nnz)
+        return values
 
     def _factorise(self, crack: np.ndarray) -> tuple:
         """Assemble and factorise the projected Hessian at the state's (u, v).
