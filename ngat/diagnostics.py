@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ngat.crack import Slit
+from ngat.forms import distances
 from ngat.minimization import StepResult
 from ngat.parameters import ParameterError
 from ngat.state import ATState
@@ -71,7 +72,7 @@ def crack_start(state: ATState, slits: Sequence[Slit]) -> tuple[np.ndarray, str]
     arrays = state.arrays
     start = state.initial_crack[arrays.elements].any(axis=1)
     for _, tip in slits:
-        nearest = np.argmin(np.linalg.norm(arrays.coords - np.asarray(tip, dtype=float), axis=1))
+        nearest = np.argmin(distances(arrays.coords, tip))
         start |= (arrays.elements == nearest).any(axis=1)
     if start.any():
         return start, "where the crack starts"

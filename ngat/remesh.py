@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 
 from ngat.band import DAMAGED, mesh_geometry
 from ngat.crack import GROWN, Slit, grown, tips_of
+from ngat.forms import distances
 from ngat.geometry import without_face_table
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
@@ -103,7 +104,7 @@ def patch_region(
     region's boundary passes twice, which Netgen's advancing front cannot close).
     """
     centroid = coords[elements].mean(axis=1)
-    region = allowed & (np.linalg.norm(centroid - centre, axis=1) < radius)
+    region = allowed & (distances(centroid, centre) < radius)
     for _ in range(10):
         edges = boundary_edges(elements[region])
         count = np.bincount(edges.ravel(), minlength=len(coords))
@@ -318,7 +319,7 @@ class TipRemesher:
         """Return the elements inside a disc that an earlier re-meshing made (less a margin)."""
         native = np.zeros(len(centroid), dtype=bool)
         for patch in state.patches:
-            distance = np.linalg.norm(centroid - patch.centre, axis=1)
+            distance = distances(centroid, patch.centre)
             native |= distance < patch.radius - 2 * self.eps
         return native
 
@@ -361,7 +362,7 @@ class TipRemesher:
         """Re-mesh the disc about one tip if it needs it; return whether the mesh changed."""
         with state.timer("remesh"):
             arrays = state.arrays
-            distance = np.linalg.norm(arrays.centroid - tip, axis=1) - arrays.diameter
+            distance = distances(arrays.centroid, tip) - arrays.diameter
             close = distance < TRIGGER * self.radius
             if not self._allowed(state, close).any():
                 return False
@@ -369,7 +370,7 @@ class TipRemesher:
             for _ in range(MAX_ROUNDS):
                 arrays = state.arrays
                 centroid = arrays.centroid
-                disc = np.linalg.norm(centroid - tip, axis=1) < self.radius
+                disc = distances(centroid, tip) < self.radius
                 disc &= ~state.dirichlet_vertices[arrays.elements].any(axis=1)
                 disc &= ~self._native(state, centroid)
                 long = disc & (arrays.diameter > EDGE_FRACTION * h)

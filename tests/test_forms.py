@@ -11,6 +11,7 @@ from ngat.forms import (
     MeshArrays,
     a_form,
     b_form,
+    distances,
     element_diameters,
     exact_dx,
     lumped_dx,
@@ -32,6 +33,13 @@ def test_vertex_rule_matches_ngsolve_lumping_rule():
     ours = vertex_rule()
     assert sorted(p[:2] for p in reference.points) == sorted(p[:2] for p in ours.points)
     np.testing.assert_allclose(sorted(reference.weights), sorted(ours.weights))
+
+
+def test_distances_are_numpys_norms_to_the_last_bit():
+    rng = np.random.default_rng(7)
+    points, point = rng.normal(size=(1000, 2)) * 10.0, rng.normal(size=2)
+    assert np.array_equal(distances(points, point), np.linalg.norm(points - point, axis=1))
+    assert distances(np.array([[3.0, 4.0]]), (0, 0))[0] == 5.0
 
 
 def test_lumped_weights_sum_to_element_area():
