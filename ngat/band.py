@@ -478,7 +478,8 @@ class CrackBand:
                 # Only an element the round made can be marked: bisection keeps the vertices'
                 # numbers and every element it makes holds one of the new vertices, and the
                 # elements it kept were not marked (the centres are the same in every round).
-                new = np.flatnonzero(elements.max(axis=1) >= known)
+                first, second, third = (elements[:, i] >= known for i in range(3))
+                new = np.flatnonzero(first | second | third)
                 diameter = element_diameters(coords, elements[new])
                 marked = np.zeros(len(elements), dtype=bool)
                 marked[new] = self.marked(coords, elements[new], damaged_tree, tips, diameter)
@@ -491,5 +492,5 @@ class CrackBand:
     def under_resolved(self, state: ATState) -> int:
         """Return how many damaged elements (a vertex with v < ``DAMAGED``) exceed the target."""
         arrays = state.arrays
-        damaged = (state.v_values[arrays.elements] < DAMAGED).any(axis=1)
+        damaged = arrays.touching(state.v_values < DAMAGED)
         return int((damaged & (arrays.diameter > self.target)).sum())

@@ -371,7 +371,7 @@ class TipRemesher:
                 arrays = state.arrays
                 centroid = arrays.centroid
                 disc = distances(centroid, tip) < self.radius
-                disc &= ~state.dirichlet_vertices[arrays.elements].any(axis=1)
+                disc &= ~arrays.touching(state.dirichlet_vertices)
                 disc &= ~self._native(state, centroid)
                 long = disc & (arrays.diameter > EDGE_FRACTION * h)
                 if not long.any():

@@ -406,7 +406,7 @@ class ATState:
         lines), the h of the crack's discrete toughness G_eff(h); 0 without a crack.
         """
         v = self.v_values
-        cracked = (v[self.arrays.elements] < 0.1).any(axis=1)
+        cracked = self.arrays.touching(v < 0.1)
         h_crack = np.sqrt(2 * self.arrays.area[cracked].mean()) if cracked.any() else 0.0
         return {
             "h_crack": float(h_crack),

@@ -42,6 +42,14 @@ def test_distances_are_numpys_norms_to_the_last_bit():
     assert distances(np.array([[3.0, 4.0]]), (0, 0))[0] == 5.0
 
 
+def test_touching_elements_are_those_with_a_vertex_in_the_set():
+    arrays = MeshArrays(load_scene("two-slits").make_mesh(0.5))
+    mask = np.random.default_rng(8).random(arrays.nv) < 0.2
+    touching = arrays.touching(mask)
+    assert np.array_equal(touching, mask[arrays.elements].any(axis=1))
+    assert 0 < touching.sum() < arrays.ne
+
+
 def test_lumped_weights_sum_to_element_area():
     mesh = load_scene("two-slits").make_mesh(0.5)
     per_element = np.asarray(
