@@ -49,6 +49,7 @@ __all__ = [
     "MeshArrays",
     "LumpedAssembler",
     "Recall",
+    "same_values",
     "RECALLED",
     "SAMPLE",
 ]
@@ -83,14 +84,23 @@ class Recall:
         """Return ``compute(values)``, or the result of an earlier call with equal values."""
         recent = self._recent.setdefault(name, [])
         for key, result in recent:
-            # A sample first: different fields (u, v, 1 − v) differ almost everywhere.
-            if np.array_equal(key[::SAMPLE], values[::SAMPLE]) and np.array_equal(key, values):
+            if same_values(key, values):
                 return result
         result = compute(values)
         result.flags.writeable = False
         recent.insert(0, (np.array(values), result))
         del recent[self.size :]
         return result
+
+
+def same_values(stored: np.ndarray, values: np.ndarray) -> bool:
+    """Return whether two arrays are equal: a memo's stored input and a new one.
+
+    Every :data:`SAMPLE`-th entry is compared first: different fields, or a field before and
+    after a solve, differ almost everywhere, and a memo asked with new values (most of the
+    times) then costs a sixty-fourth of a full comparison.
+    """
+    return np.array_equal(stored[::SAMPLE], values[::SAMPLE]) and np.array_equal(stored, values)
 
 
 def vertex_rule() -> IntegrationRule:

@@ -20,7 +20,7 @@ import functools
 
 import numpy as np
 
-from ngat.forms import LumpedAssembler, graph_matrix
+from ngat.forms import LumpedAssembler, graph_matrix, same_values
 from ngat.state import ATState
 
 __all__ = ["LumpedOperators"]
@@ -105,7 +105,7 @@ class LumpedOperators:
         """
         state = self.state
         inputs = (state.v_values if v is None else v, state.u_values)
-        if self._a_inputs is not None and all(map(np.array_equal, self._a_inputs, inputs)):
+        if self._a_inputs is not None and all(map(same_values, self._a_inputs, inputs)):
             return
         self.a_matrix.AsVector().FV().NumPy()[:] = self.u_matrix_values(v)
         self._a_inputs = tuple(np.array(array) for array in inputs)

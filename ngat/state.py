@@ -24,7 +24,7 @@ from ngsolve import H1, TRIG, CoefficientFunction, GridFunction, IntegrationRule
 from ngat import pardiso
 from ngat.elasticity import elasticity
 from ngat.estimators import EdgeTopology
-from ngat.forms import MeshArrays, upper_graph
+from ngat.forms import MeshArrays, same_values, upper_graph
 from ngat.functional import LumpedFunctional
 from ngat.parameters import ModelParameters
 from ngat.pardiso import in_background
@@ -305,7 +305,7 @@ class ATState:
         computes it anew.
         """
         stored = self._of_v.get(key)
-        if stored is not None and all(map(np.array_equal, stored[0], inputs)):
+        if stored is not None and all(map(same_values, stored[0], inputs)):
             return stored[1]
         value = compute()
         self._of_v[key] = (tuple(np.array(array) for array in inputs), value)
@@ -386,7 +386,7 @@ class ATState:
         """
         u, v = self.u_values, self.v_values
         stored = self._energies
-        if stored is not None and np.array_equal(stored[0], u) and np.array_equal(stored[1], v):
+        if stored is not None and same_values(stored[0], u) and same_values(stored[1], v):
             return dict(stored[2])
         energies = self.functional.energies(self.arrays, u, v)
         self._energies = (u.copy(), v.copy(), energies)
