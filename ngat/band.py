@@ -189,10 +189,16 @@ def band_elements(
     np.ndarray
         (ne,) boolean mask.
     """
-    if len(elements) == 0 or _count(centres) == 0:
-        return np.zeros(len(elements), dtype=bool)
+    return _near(coords[elements[:, 0]], diameter, centres, radius)
+
+
+def _near(
+    points: np.ndarray, diameter: np.ndarray, centres: np.ndarray | cKDTree, radius: float
+) -> np.ndarray:
+    """:func:`band_elements` of the elements with first vertices ``points`` (n, 2)."""
+    if len(points) == 0 or _count(centres) == 0:
+        return np.zeros(len(points), dtype=bool)
     bounds = radius + diameter
-    points = coords[elements[:, 0]]
     if isinstance(centres, cKDTree) or len(centres) > FEW_CENTRES:
         return nearest_distance(centres, points, bounds) <= bounds
     distance = np.full(len(points), np.inf)
@@ -254,6 +260,7 @@ class CrackBand:
         self.trigger = trigger
         self.grading = grading
         self._clear: dict[float, tuple] = {}  # target → (mesh arrays, damaged mask) found clear
+        self._wide: dict[float, tuple] = {}  # diameter → (elements, wider elements' arrays)
 
     def search(self) -> None:
         """Resolve the band to the coarser target of a step's search for its crack.
@@ -333,19 +340,34 @@ class CrackBand:
         marked = np.zeros(len(elements), dtype=bool)
         onset, radius = self.at_onset(tips), TIP_RADIUS * self.eps
         if onset.any():
-            fine = np.flatnonzero(diameter > self.onset)
+            fine, points, width = self._wider(coords, elements, diameter, self.onset)
             slit_tips = np.array([tip for _, tip in self.slits], dtype=float)[onset]
-            reach = ONSET_RADIUS * self.eps
-            marked[fine] = band_elements(coords, elements[fine], diameter[fine], slit_tips, reach)
+            marked[fine] = _near(points, width, slit_tips, ONSET_RADIUS * self.eps)
             tips = tips[~onset]
-        coarse = np.flatnonzero(diameter > self.target)
+        coarse, points, width = self._wider(coords, elements, diameter, self.target)
         if len(coarse) == 0:
             return marked
-        elements, diameter = elements[coarse], diameter[coarse]
-        near = band_elements(coords, elements, diameter, damaged, BUFFER * self.eps)
-        near |= band_elements(coords, elements, diameter, tips, radius)
+        near = _near(points, width, damaged, BUFFER * self.eps)
+        near |= _near(points, width, tips, radius)
         marked[coarse[near]] = True
         return marked
+
+    def _wider(
+        self, coords: np.ndarray, elements: np.ndarray, diameter: np.ndarray, size: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return the elements wider than ``size``: their numbers, first vertices and diameters.
+
+        Kept for the last ``elements`` array per size: a load step's iterations ask
+        :meth:`marked` about the same mesh after every v-step, and the gathers cost more than
+        the distances to the tips.
+        """
+        kept = self._wide.get(size)
+        if kept is not None and kept[0] is elements:
+            return kept[1]
+        wider = np.flatnonzero(diameter > size)
+        found = (wider, coords[elements[wider, 0]], diameter[wider])
+        self._wide[size] = (elements, found)
+        return found
 
     def graded(
         self,
