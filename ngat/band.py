@@ -119,7 +119,9 @@ def nearest_distance(
     A k-d tree query with one bound for all points searches every point as far as the largest
     bound: on a graded mesh a few wide elements far from the crack set it for all. The points
     are therefore queried per power-of-two class of their bounds, each class with its own
-    largest bound. A distance within a point's bound is exact; beyond it, it may be exact or ∞.
+    largest bound, and only those within their bound of the centres' bounding box (a crack's
+    new damage lies about its tip). A distance within a point's bound is exact; beyond it, it
+    may be exact or ∞.
 
     Parameters
     ----------
@@ -134,9 +136,14 @@ def nearest_distance(
     if len(points) == 0:
         return distance
     tree = centres if isinstance(centres, cKDTree) else cKDTree(centres)
-    classes = np.frexp(bounds)[1]
+    # A point farther than its bound from the centres' bounding box is not searched.
+    (left, bottom), (right, top) = tree.mins, tree.maxes
+    x, y = points[:, 0], points[:, 1]
+    near = (x >= left - bounds) & (x <= right + bounds) & (y >= bottom - bounds)
+    candidates = np.flatnonzero(near & (y <= top + bounds))
+    classes = np.frexp(bounds[candidates])[1]
     for level in np.unique(classes):
-        among = np.flatnonzero(classes == level)
+        among = candidates[classes == level]
         distance[among] = tree.query(points[among], distance_upper_bound=bounds[among].max())[0]
     return distance
 
