@@ -245,10 +245,10 @@ class ATState:
             points=[(1 - 2 * shift, shift), (shift, 1 - 2 * shift), (shift, shift)],
             weights=[1, 1, 1],
         )
-        points = self.mesh.MapToAllElements({TRIG: rule}, self.mesh.Materials(region))
-        index = self.mesh.ngmesh.Elements2D().NumPy()["index"]
-        numbers = [i + 1 for i, name in enumerate(self.mesh.GetMaterials()) if name == region]
-        return points, self.arrays.elements[np.isin(index, numbers)].ravel()
+        faces = self.mesh.Materials(region)
+        points = self.mesh.MapToAllElements({TRIG: rule}, faces)
+        chosen = np.array(faces.Mask(), dtype=bool)
+        return points, self.arrays.elements[chosen[self.arrays.material]].ravel()
 
     @property
     def edges(self) -> EdgeTopology:
