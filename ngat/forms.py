@@ -97,8 +97,8 @@ def same_values(stored: np.ndarray, values: np.ndarray) -> bool:
     """Return whether two arrays are equal: a memo's stored input and a new one.
 
     Every :data:`SAMPLE`-th entry is compared first: different fields, or a field before and
-    after a solve, differ almost everywhere, and a memo asked with new values (most of the
-    times) then costs a sixty-fourth of a full comparison.
+    after a solve, differ almost everywhere, so a memo asked with new values, as it mostly is,
+    costs a sixty-fourth of a full comparison.
     """
     return np.array_equal(stored[::SAMPLE], values[::SAMPLE]) and np.array_equal(stored, values)
 
