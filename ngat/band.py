@@ -59,7 +59,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ngat.crack import GROWN, Slit, grown, tips_of
-from ngat.forms import element_diameters
+from ngat.forms import distances, element_diameters
 from ngat.refinement import bisect, rebuild
 from ngat.state import ATState
 
@@ -209,9 +209,8 @@ def _near(
     if isinstance(centres, cKDTree) or len(centres) > FEW_CENTRES:
         return nearest_distance(centres, points, bounds) <= bounds
     distance = np.full(len(points), np.inf)
-    for x, y in centres:
-        dx, dy = points[:, 0] - x, points[:, 1] - y
-        np.minimum(distance, np.sqrt(dx * dx + dy * dy), out=distance)
+    for centre in centres:
+        np.minimum(distance, distances(points, centre), out=distance)
     return distance <= bounds
 
 

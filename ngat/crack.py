@@ -24,7 +24,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ngat.forms import MeshArrays, mesh_edges
+from ngat.forms import MeshArrays, distances, mesh_edges
 from ngat.state import ATState, SceneError
 
 __all__ = [
@@ -168,7 +168,7 @@ def crack_tips(
         crack[inside[member]] = True
         crossings = _crossings(coords, edges, v, crack, cracked, threshold)
         candidates = np.vstack([points[member], crossings])
-        far = candidates[np.argmax(np.linalg.norm(candidates - mouth, axis=1))]
+        far = candidates[np.argmax(distances(candidates, mouth))]
         tips.append((float(far[0]), float(far[1])))
     return tips
 
