@@ -3,8 +3,9 @@
 I_j(u, v) of eq. (7) is a polynomial in the nodal values; its gradient and Hessian are exact
 (:class:`ngat.functional.LumpedFunctional`, which also states I_j as an NGSolve energy, the
 definition the tests check them against) and, unlike alternating minimisation, Newton sees the
-coupling block ∂²I_j/∂u∂v. This module scatters the Hessian's element blocks into one sparse
-matrix per mesh and solves with it.
+coupling block ∂²I_j/∂u∂v. This module writes the Hessian into one sparse matrix per mesh (the
+blocks that are fixed element matrices times weights by a product per mesh, the others by a
+scatter of their element blocks) and solves with it.
 
 A Newton step solves H δ = −∇I_j with u fixed on Ω_D and v fixed on CR(t_k) and on the bounds
 where the gradient pushes v out of [0, 1] (a projected Newton method), then backtracks along
