@@ -70,7 +70,7 @@ def crack_start(state: ATState, slits: Sequence[Slit]) -> tuple[np.ndarray, str]
     scene's imposed crack; a scene with neither may crack anywhere, so then every element.
     """
     arrays = state.arrays
-    start = state.initial_crack[arrays.elements].any(axis=1)
+    start = arrays.touching(state.initial_crack)
     for _, tip in slits:
         nearest = np.argmin(distances(arrays.coords, tip))
         start |= (arrays.elements == nearest).any(axis=1)

@@ -43,6 +43,7 @@ from ngsolve import GridFunction
 
 from ngat.band import DAMAGED, CrackBand
 from ngat.crack import Slit, components, tips_of
+from ngat.forms import distances
 from ngat.halfsteps import HalfStepSolvers
 from ngat.state import ATState
 
@@ -172,7 +173,7 @@ class CrackExtension:
             if fitted is None:
                 return []
             end, tangent, longest = fitted
-            distance = np.linalg.norm(coords[indices] - tip, axis=1)
+            distance = distances(coords[indices], tip)
             own = labels[indices[np.argmin(distance)]]
             other = distance[labels[indices] != own].min(initial=np.inf)
             # Near another crack at distance D the path bends with a radius of about D/2.
