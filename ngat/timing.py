@@ -66,6 +66,11 @@ class BusyClock:
                 if self._open == 0:
                     self._total += self.now() - self._since
 
+    @property
+    def busy(self) -> bool:
+        """Whether a span is under way now."""
+        return self._open > 0
+
     def seconds(self) -> float:
         """Busy seconds so far, a span under way counted up to now."""
         with self._lock:
@@ -144,6 +149,12 @@ class PhaseTimer:
         finally:
             self._count()
             self._open.pop()
+
+    @property
+    def phase(self) -> str:
+        """The innermost phase under way, ``"other"`` between phases (read from any thread)."""
+        innermost = self._open[-1:]  # one slice: the list may change on the timer's thread
+        return innermost[0] if innermost else "other"
 
     def elapsed(self) -> float:
         """Seconds since the timer was created, plus those of the earlier part."""

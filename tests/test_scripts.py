@@ -77,6 +77,29 @@ def test_bench_estimators_on_a_small_mesh(tmp_path):
     assert (tmp_path / "bench.png").stat().st_size > 5_000
 
 
+def test_sample_without_solver_accounts_for_every_second_with_no_solver(tmp_path):
+    subprocess.run(
+        [
+            sys.executable, str(ROOT / "scripts" / "sample_without_solver.py"), "--quick",
+            "--until", "1.0", "--interval", "0.001", "--out", str(tmp_path),
+        ],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    samples = json.loads((tmp_path / "samples.json").read_text())
+    by_timer = samples["without_solver_s"]
+    # The samples charge the solver clock's idle seconds: together they are the run's.
+    assert samples["sampled_s"] == pytest.approx(sum(by_timer.values()), rel=0.05, abs=0.02)
+    assert sum(samples["phases_s"].values()) == pytest.approx(samples["sampled_s"], abs=0.01)
+    assert sum(samples["lines_s"].values()) == pytest.approx(samples["sampled_s"], abs=0.01)
+    # Every sample knows the run's phase, and the largest phase is found where the timer has it.
+    assert set(samples["phases_s"]) <= set(by_timer)
+    largest = max(by_timer, key=by_timer.get)
+    assert samples["phases_s"].get(largest, 0.0) > 0.5 * by_timer[largest]
+    assert all(".py:" in line for line in samples["lines_s"])
+    assert "| phase | run's timer [s] | sampled [s] |" in (tmp_path / "samples.md").read_text()
+    assert (tmp_path / "samples.png").stat().st_size > 5_000
+
+
 @pytest.mark.skipif(not (ROOT / ".git").exists(), reason="needs a git checkout")
 def test_bench_paper_against_the_same_revision(tmp_path):
     # HEAD against HEAD: the same code on both sides, so the deterministic figures agree. The

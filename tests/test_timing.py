@@ -56,6 +56,28 @@ def test_spans_on_two_threads_share_the_clock():
     assert clock.seconds() == pytest.approx(3.0)
 
 
+def test_the_clock_says_whether_a_span_is_under_way():
+    clock = BusyClock(Now())
+    assert not clock.busy
+    with clock():
+        with clock():
+            assert clock.busy
+        assert clock.busy  # the outer span is still open
+    assert not clock.busy
+
+
+def test_the_timer_names_the_innermost_phase_under_way():
+    timer = PhaseTimer(clock=BusyClock(Now()))
+    seen = [timer.phase]
+    with timer("remesh"):
+        seen.append(timer.phase)
+        with timer("refine"):
+            seen.append(timer.phase)
+        seen.append(timer.phase)
+    seen.append(timer.phase)
+    assert seen == ["other", "remesh", "refine", "remesh", "other"]
+
+
 def test_the_solve_phase_runs_the_solver_clock_and_the_summary_reports_it():
     timer = PhaseTimer()
     with timer("estimate"):
