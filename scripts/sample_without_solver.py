@@ -31,7 +31,6 @@ import argparse
 import json
 import sys
 import threading
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -120,10 +119,10 @@ class Sampler:
         solver's, and the stack is not read (a solve runs most of the time: the sampler's own
         work stays small).
         """
-        now, busy, where = time.perf_counter(), self.clock.seconds(), self._where()
+        now, busy, where = self.clock.now(), self.clock.seconds(), self._where()
         while not self._done.wait(self.interval):
             then, busy_then = now, busy
-            now, busy = time.perf_counter(), self.clock.seconds()
+            now, busy = self.clock.now(), self.clock.seconds()
             idle = (now - then) - (busy - busy_then)
             if not self.clock.busy:
                 where = self._where()
