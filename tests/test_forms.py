@@ -16,6 +16,7 @@ from ngat.forms import (
     exact_dx,
     lumped_dx,
     row_sum,
+    same_values,
     sparse_from_coo,
     vertex_rule,
 )
@@ -274,6 +275,25 @@ def test_recalled_element_quantities_are_those_of_the_current_values():
     np.testing.assert_array_equal(changed, fresh.squared_gradient(v))
     np.testing.assert_array_equal(arrays.square_mean(v), fresh.square_mean(v))
     np.testing.assert_array_equal(arrays.square_mean(v, lumped=False), fresh.square_mean(v, False))
+
+
+@pytest.mark.parametrize("where", [0, 1, 500, 1000, 1001, 2001])
+def test_same_values_tells_an_array_with_one_other_entry_apart(where):
+    # The memos compare every 64th entry first, then all: a change anywhere counts.
+    stored = np.random.default_rng(5).random(2002)
+    values = stored.copy()
+    assert same_values(stored, values)
+    values[where] += 1e-15
+    assert not same_values(stored, values)
+    assert same_values(stored, values) == np.array_equal(stored, values)
+
+
+def test_same_values_of_other_shapes_empty_arrays_and_nan_as_numpy_says():
+    assert not same_values(np.zeros(5), np.zeros(6))
+    assert same_values(np.zeros(0), np.zeros(0))
+    assert same_values(np.zeros((2, 3), dtype=bool), np.zeros((2, 3), dtype=bool))
+    nan = np.array([1.0, np.nan, 2.0])
+    assert not same_values(nan, nan.copy())  # NaN equals nothing, as in numpy.array_equal
 
 
 def test_sparse_from_coo_is_scipys_csr_with_duplicates_summed():
