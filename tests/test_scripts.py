@@ -91,10 +91,15 @@ def test_sample_without_solver_accounts_for_every_second_with_no_solver(tmp_path
     assert samples["sampled_s"] == pytest.approx(sum(by_timer.values()), rel=0.05, abs=0.02)
     assert sum(samples["phases_s"].values()) == pytest.approx(samples["sampled_s"], abs=0.01)
     assert sum(samples["lines_s"].values()) == pytest.approx(samples["sampled_s"], abs=0.01)
-    # Every sample knows the run's phase, and the largest phase is found where the timer has it.
+    # Every sample knows the run's phase (but the first milliseconds, before the run's timer
+    # exists), and the largest phase is found where the timer has it.
+    before = samples["phases_s"].pop("before the run's timer", 0.0)
+    assert before < 0.05
     assert set(samples["phases_s"]) <= set(by_timer)
     largest = max(by_timer, key=by_timer.get)
     assert samples["phases_s"].get(largest, 0.0) > 0.5 * by_timer[largest]
+    outside = samples["lines_s"].pop("outside the package", 0.0)  # the script around the run
+    assert outside < 0.05
     assert all(".py:" in line for line in samples["lines_s"])
     assert "| phase | run's timer [s] | sampled [s] |" in (tmp_path / "samples.md").read_text()
     assert (tmp_path / "samples.png").stat().st_size > 5_000
